@@ -1,0 +1,1 @@
+//! Frames: what a render produces, in memory, and its files (EXR, PNG).

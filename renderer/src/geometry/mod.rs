@@ -1,0 +1,143 @@
+//! Triangle geometry and ray queries: one obvhs CWBVH over every triangle of the scene,
+//! a watertight ray/triangle test, and robust ray-origin offsets.
+
+use crate::math::Ray;
+use glam::{Vec2, Vec3};
+
+/// All triangles of a scene in world space, as one indexed soup.
+#[derive(Clone, Debug, Default)]
+pub struct Mesh {
+    pub positions: Vec<Vec3>,
+    /// Per-vertex shading normals; empty, or the same length as `positions`.
+    pub normals: Vec<Vec3>,
+    /// Per-vertex texture coordinates; empty, or the same length as `positions`.
+    pub uvs: Vec<Vec2>,
+    pub triangles: Vec<[u32; 3]>,
+    /// Material index of each triangle (into `Scene::materials`).
+    pub material: Vec<u32>,
+}
+
+impl Mesh {
+    /// Appends another mesh (already in world space) whose triangles all use `material`.
+    pub fn append(&mut self, positions: &[Vec3], normals: &[Vec3], uvs: &[Vec2], triangles: &[[u32; 3]], material: u32) {
+        let base = self.positions.len() as u32;
+        let had_normals = !self.normals.is_empty() || self.positions.is_empty();
+        let had_uvs = !self.uvs.is_empty() || self.positions.is_empty();
+        // Keep the per-vertex arrays aligned: pad whichever side lacks the attribute.
+        if !normals.is_empty() && !had_normals {
+            self.normals.resize(self.positions.len(), Vec3::ZERO);
+        }
+        if !uvs.is_empty() && !had_uvs {
+            self.uvs.resize(self.positions.len(), Vec2::ZERO);
+        }
+        self.positions.extend_from_slice(positions);
+        if !self.normals.is_empty() || !normals.is_empty() {
+            if normals.is_empty() {
+                self.normals.resize(self.positions.len(), Vec3::ZERO);
+            } else {
+                self.normals.extend_from_slice(normals);
+            }
+        }
+        if !self.uvs.is_empty() || !uvs.is_empty() {
+            if uvs.is_empty() {
+                self.uvs.resize(self.positions.len(), Vec2::ZERO);
+            } else {
+                self.uvs.extend_from_slice(uvs);
+            }
+        }
+        self.triangles.extend(triangles.iter().map(|t| [t[0] + base, t[1] + base, t[2] + base]));
+        self.material.extend(std::iter::repeat_n(material, triangles.len()));
+    }
+
+    pub fn triangle(&self, i: usize) -> [Vec3; 3] {
+        let [a, b, c] = self.triangles[i];
+        [self.positions[a as usize], self.positions[b as usize], self.positions[c as usize]]
+    }
+}
+
+/// A closest hit: distance along the ray, triangle index (into `Mesh::triangles`), and the
+/// barycentrics (b1, b2) of the hit (b0 = 1 − b1 − b2).
+#[derive(Clone, Copy, Debug)]
+pub struct Hit {
+    pub t: f32,
+    pub prim: u32,
+    pub bary: Vec2,
+}
+
+/// The ray-query structure over a [`Mesh`].
+pub struct Accel {
+    _private: (),
+}
+
+impl Accel {
+    /// Builds the BVH (in parallel). Degenerate triangles are kept in the mesh but can never be hit.
+    pub fn build(mesh: &Mesh) -> Accel {
+        let _ = mesh;
+        todo!("geometry helper")
+    }
+
+    /// Closest hit with t in (0, tmax).
+    pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<Hit> {
+        let _ = (ray, tmax);
+        todo!("geometry helper")
+    }
+
+    /// Any hit with t in (0, tmax) (shadow rays).
+    pub fn occluded(&self, ray: &Ray, tmax: f32) -> bool {
+        let _ = (ray, tmax);
+        todo!("geometry helper")
+    }
+}
+
+/// Moves `p` off the surface along the geometric normal `ng` on the side of `dir`, by an amount
+/// that scales with |p| (Wächter & Binder, Ray Tracing Gems ch. 6), so spawned rays neither
+/// re-hit their own triangle nor tunnel through thin geometry at scene scales from 1e-3 to 1e4.
+pub fn offset_ray_origin(p: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
+    let _ = (p, ng, dir);
+    todo!("geometry helper")
+}
+
+impl Mesh {
+    /// Unit geometric normal of triangle `i`: the winding normal, flipped to agree with the
+    /// vertex normals when the mesh has them (files disagree on winding; their normals are what
+    /// the author looked at). Zero for degenerate triangles.
+    pub fn geometric_normal(&self, i: usize) -> Vec3 {
+        let [p0, p1, p2] = self.triangle(i);
+        let n = (p1 - p0).cross(p2 - p0);
+        let len = n.length();
+        if !(len > 0.0) || !len.is_finite() {
+            return Vec3::ZERO;
+        }
+        let mut n = n / len;
+        if !self.normals.is_empty() {
+            let [a, b, c] = self.triangles[i];
+            let avg = self.normals[a as usize] + self.normals[b as usize] + self.normals[c as usize];
+            if avg.dot(n) < 0.0 {
+                n = -n;
+            }
+        }
+        n
+    }
+
+    /// Area of triangle `i` (0 for degenerate ones).
+    pub fn area(&self, i: usize) -> f32 {
+        let [p0, p1, p2] = self.triangle(i);
+        let a = 0.5 * (p1 - p0).cross(p2 - p0).length();
+        if a.is_finite() { a } else { 0.0 }
+    }
+
+    /// Axis-aligned bounds of all vertices used by triangles.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for p in &self.positions {
+            lo = lo.min(*p);
+            hi = hi.max(*p);
+        }
+        if self.positions.is_empty() {
+            (Vec3::ZERO, Vec3::ZERO)
+        } else {
+            (lo, hi)
+        }
+    }
+}
