@@ -1,1 +1,37 @@
-fn main() {}
+//! `pixguide`: render scenes, and (soon) denoise them, from one program.
+
+mod cli;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(name = "pixguide", version, about = "CPU path tracer and neural Monte Carlo denoiser (pixel-wise guidance, Han et al. 2023)")]
+struct Args {
+    /// Worker threads (default: all cores). Images do not depend on it.
+    #[arg(long, global = true)]
+    threads: Option<usize>,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene (.toml, .gltf/.glb) to EXR, with an optional PNG preview.
+    Render(cli::render::RenderArgs),
+}
+
+fn main() {
+    let args = Args::parse();
+    if let Some(n) = args.threads {
+        if let Err(e) = rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global() {
+            eprintln!("warning: could not set the thread count: {e}");
+        }
+    }
+    let result = match args.command {
+        Command::Render(a) => cli::render::run(a),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}

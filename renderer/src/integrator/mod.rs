@@ -1,1 +1,224 @@
-//! Integrators: the path tracer.
+//! The render driver: tiles in parallel (rayon), one independent random stream per pixel
+//! sample, per-pixel statistics in f64, and the requested extra buffers.
+
+pub mod path;
+
+use crate::film::descriptors::FIELDS;
+use crate::film::{BufferRequest, Descriptors, Frame, PixelBuffer, Welford};
+use crate::rng::Pcg32;
+use crate::scene::Scene;
+use crate::{Error, Result};
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+/// Tile edge in pixels: small enough to balance 2 threads on a 64×64 image, large enough
+/// that per-tile overhead is negligible.
+pub const TILE: u32 = 16;
+
+#[derive(Clone, Debug)]
+pub struct RenderOptions {
+    pub spp: u32,
+    pub seed: u64,
+    pub max_bounces: u32,
+    pub russian_roulette: bool,
+    pub request: BufferRequest,
+    /// Render only this window of pixels (x0, y0, width, height); the frame has the window's size.
+    pub crop: Option<(u32, u32, u32, u32)>,
+}
+
+impl RenderOptions {
+    /// The scene's own settings with the given buffer request.
+    pub fn from_scene(scene: &Scene, request: BufferRequest) -> Self {
+        RenderOptions {
+            spp: scene.settings.spp,
+            seed: scene.settings.seed,
+            max_bounces: scene.settings.max_bounces,
+            russian_roulette: scene.settings.russian_roulette,
+            request,
+            crop: None,
+        }
+    }
+}
+
+/// Counts reported after a render.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RenderStats {
+    pub wall: Duration,
+    pub samples: u64,
+    pub rays: u64,
+}
+
+impl RenderStats {
+    pub fn summary(&self) -> String {
+        let s = self.wall.as_secs_f64().max(1e-9);
+        format!(
+            "{:.2} s wall, {:.3} M samples/s, {:.3} M rays/s",
+            s,
+            self.samples as f64 / s / 1e6,
+            self.rays as f64 / s / 1e6
+        )
+    }
+}
+
+struct TileResult {
+    x0: u32,
+    y0: u32,
+    w: u32,
+    h: u32,
+    radiance: Vec<Welford>,
+    diffuse: Vec<Welford>,
+    specular: Vec<Welford>,
+    albedo: Vec<Welford>,
+    normal: Vec<Welford>,
+    depth: Vec<Welford>,
+    descriptors: Vec<f32>,
+    nonfinite: u64,
+    rays: u64,
+}
+
+/// Renders `scene`. `progress` is called with the number of pixels finished so far (from any
+/// thread). The image depends only on the options, never on the thread count.
+pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Sync)) -> Result<(Frame, RenderStats)> {
+    let (cw, ch) = (scene.camera.width, scene.camera.height);
+    let (x0, y0, width, height) = opts.crop.unwrap_or((0, 0, cw, ch));
+    if opts.spp == 0 {
+        return Err(Error::Invalid("spp must be at least 1".into()));
+    }
+    if width == 0 || height == 0 || x0 + width > cw || y0 + height > ch {
+        return Err(Error::Invalid(format!("crop window {x0},{y0} {width}x{height} is not inside the {cw}x{ch} image")));
+    }
+    let req = opts.request;
+    let desc_len = width as u64 * height as u64 * opts.spp as u64 * FIELDS as u64;
+    if req.descriptors && desc_len > (1u64 << 32) {
+        return Err(Error::Invalid(format!(
+            "per-sample descriptors of {width}x{height} at {} spp need {} GiB; render fewer samples or a crop",
+            opts.spp,
+            desc_len * 4 >> 30
+        )));
+    }
+
+    let start = Instant::now();
+    let mut tiles = Vec::new();
+    for ty in (0..height).step_by(TILE as usize) {
+        for tx in (0..width).step_by(TILE as usize) {
+            tiles.push((tx, ty, TILE.min(width - tx), TILE.min(height - ty)));
+        }
+    }
+    let done = AtomicU64::new(0);
+    let cam = &scene.camera;
+    let to_camera = |n: Vec3| Vec3::new(n.dot(cam.right), n.dot(cam.up), -n.dot(cam.forward));
+
+    let results: Vec<TileResult> = tiles
+        .par_iter()
+        .map(|&(tx, ty, tw, th)| {
+            let n = (tw * th) as usize;
+            let stats = |on: bool, c: usize| if on { vec![Welford::default(); n * c] } else { Vec::new() };
+            let mut t = TileResult {
+                x0: tx,
+                y0: ty,
+                w: tw,
+                h: th,
+                radiance: stats(true, 3),
+                diffuse: stats(req.split, 3),
+                specular: stats(req.split, 3),
+                albedo: stats(req.gbuffers, 3),
+                normal: stats(req.gbuffers, 3),
+                depth: stats(req.gbuffers, 1),
+                descriptors: if req.descriptors { vec![0.0; n * opts.spp as usize * FIELDS] } else { Vec::new() },
+                nonfinite: 0,
+                rays: 0,
+            };
+            for ly in 0..th {
+                for lx in 0..tw {
+                    let (px, py) = (x0 + tx + lx, y0 + ty + ly);
+                    let pixel = py as u64 * cw as u64 + px as u64;
+                    let li = (ly * tw + lx) as usize;
+                    for s in 0..opts.spp {
+                        let mut rng = Pcg32::for_sample(opts.seed, pixel, s as u64);
+                        let film = Vec2::new(px as f32, py as f32) + rng.next_2d();
+                        let ray = cam.ray(film);
+                        let mut r = path::trace(scene, ray, &mut rng, opts.max_bounces, opts.russian_roulette, req);
+                        t.rays += r.rays as u64;
+                        if !(r.radiance.is_finite() && r.diffuse.is_finite()) {
+                            t.nonfinite += 1;
+                            r.radiance = Vec3::ZERO;
+                            r.diffuse = Vec3::ZERO;
+                        }
+                        push3(&mut t.radiance[li * 3..li * 3 + 3], r.radiance);
+                        if req.split {
+                            push3(&mut t.diffuse[li * 3..li * 3 + 3], r.diffuse);
+                            // Non-negative by construction; max() only absorbs rounding.
+                            push3(&mut t.specular[li * 3..li * 3 + 3], (r.radiance - r.diffuse).max(Vec3::ZERO));
+                        }
+                        if req.gbuffers {
+                            push3(&mut t.albedo[li * 3..li * 3 + 3], r.albedo);
+                            push3(&mut t.normal[li * 3..li * 3 + 3], to_camera(r.normal));
+                            t.depth[li].push(r.depth);
+                        }
+                        if req.descriptors {
+                            let o = (li * opts.spp as usize + s as usize) * FIELDS;
+                            t.descriptors[o..o + FIELDS].copy_from_slice(&r.descriptor);
+                        }
+                    }
+                }
+                progress(done.fetch_add(tw as u64, Ordering::Relaxed) + tw as u64);
+            }
+            t
+        })
+        .collect();
+
+    let pixels = (width * height) as usize;
+    let buf = |on: bool, c: usize| if on { Some(PixelBuffer::new(c, pixels)) } else { None };
+    let mut frame = Frame {
+        width,
+        height,
+        spp: opts.spp,
+        radiance: PixelBuffer::new(3, pixels),
+        diffuse: buf(req.split, 3),
+        specular: buf(req.split, 3),
+        albedo: buf(req.gbuffers, 3),
+        normal: buf(req.gbuffers, 3),
+        depth: buf(req.gbuffers, 1),
+        depth_scale: 10.0 * scene.radius,
+        descriptors: if req.descriptors { Some(Descriptors::new(width, height, opts.spp)) } else { None },
+        nonfinite_samples: 0,
+    };
+    let mut rays = 0;
+    for t in &results {
+        frame.nonfinite_samples += t.nonfinite;
+        rays += t.rays;
+        for ly in 0..t.h {
+            for lx in 0..t.w {
+                let li = (ly * t.w + lx) as usize;
+                let i = ((t.y0 + ly) * width + t.x0 + lx) as usize;
+                frame.radiance.set(i, &t.radiance[li * 3..li * 3 + 3]);
+                let pairs = [
+                    (&mut frame.diffuse, &t.diffuse, 3),
+                    (&mut frame.specular, &t.specular, 3),
+                    (&mut frame.albedo, &t.albedo, 3),
+                    (&mut frame.normal, &t.normal, 3),
+                    (&mut frame.depth, &t.depth, 1),
+                ];
+                for (dst, src, c) in pairs {
+                    if let Some(d) = dst {
+                        d.set(i, &src[li * c..li * c + c]);
+                    }
+                }
+                if let Some(d) = &mut frame.descriptors {
+                    let n = opts.spp as usize * FIELDS;
+                    d.data[i * n..(i + 1) * n].copy_from_slice(&t.descriptors[li * n..(li + 1) * n]);
+                }
+            }
+        }
+    }
+    let stats = RenderStats { wall: start.elapsed(), samples: pixels as u64 * opts.spp as u64, rays };
+    Ok((frame, stats))
+}
+
+fn push3(acc: &mut [Welford], v: Vec3) {
+    acc[0].push(v.x);
+    acc[1].push(v.y);
+    acc[2].push(v.z);
+}

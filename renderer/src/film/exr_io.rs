@@ -1,0 +1,119 @@
+//! Frames to and from one single-part EXR (f32, ZIP-compressed, channels named in `channels`).
+
+use super::channels::{self, Layer};
+use super::{Frame, PixelBuffer};
+use crate::{Error, Result};
+use exr::prelude::*;
+use std::collections::HashMap;
+use std::path::Path;
+
+/// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so a
+/// reader (or an interrupted run) never sees a half-written file.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    let tmp = tmp_path(path);
+    std::fs::write(&tmp, bytes).map_err(|e| Error::io(&tmp, e))?;
+    std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
+}
+
+fn tmp_path(path: &Path) -> std::path::PathBuf {
+    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+    name.push(".partial");
+    path.with_file_name(name)
+}
+
+fn push_layer(list: &mut Vec<AnyChannel<FlatSamples>>, layer: &Layer, buf: &PixelBuffer) {
+    let n = buf.mean.len() / buf.channels;
+    for c in 0..buf.channels {
+        let mean: Vec<f32> = (0..n).map(|i| buf.mean[i * buf.channels + c]).collect();
+        let var: Vec<f32> = (0..n).map(|i| buf.var[i * buf.channels + c]).collect();
+        list.push(AnyChannel::new(layer.mean[c], FlatSamples::F32(mean)));
+        list.push(AnyChannel::new(layer.var[c], FlatSamples::F32(var)));
+    }
+}
+
+/// Writes every buffer of `frame` (descriptors go to their own file, see `Descriptors`).
+pub fn write_frame(frame: &Frame, path: &Path) -> Result<()> {
+    let mut list = Vec::new();
+    push_layer(&mut list, &channels::RADIANCE, &frame.radiance);
+    let aux = [
+        (&channels::DIFFUSE, &frame.diffuse),
+        (&channels::SPECULAR, &frame.specular),
+        (&channels::ALBEDO, &frame.albedo),
+        (&channels::NORMAL, &frame.normal),
+        (&channels::DEPTH, &frame.depth),
+    ];
+    for (layer, buf) in aux {
+        if let Some(b) = buf {
+            push_layer(&mut list, layer, b);
+        }
+    }
+    let mut attrs = LayerAttributes::default();
+    attrs.other.insert(Text::from(channels::ATTR_SPP), AttributeValue::I32(frame.spp as i32));
+    attrs.other.insert(Text::from(channels::ATTR_DEPTH_SCALE), AttributeValue::F32(frame.depth_scale));
+    let size = (frame.width as usize, frame.height as usize);
+    let layer = exr::image::Layer::new(size, attrs, Encoding::SMALL_LOSSLESS, AnyChannels::sort(list.into()));
+    let image = Image::from_layer(layer);
+    let tmp = tmp_path(path);
+    image.write().to_file(&tmp).map_err(|e| Error::image(&tmp, e))?;
+    std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
+}
+
+/// Reads a frame written by [`write_frame`] (or any EXR with at least `R,G,B`). Layers that are
+/// absent come back as `None`; a missing variance channel reads as zeros.
+pub fn read_frame(path: &Path) -> Result<Frame> {
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|e| Error::image(path, e))?;
+    let layer = &image.layer_data;
+    let (w, h) = (layer.size.0, layer.size.1);
+    let map: HashMap<String, Vec<f32>> = layer
+        .channel_data
+        .list
+        .iter()
+        .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
+        .collect();
+    let get = |l: &Layer| -> Option<PixelBuffer> {
+        let mut buf = PixelBuffer::new(l.mean.len(), w * h);
+        for (c, name) in l.mean.iter().enumerate() {
+            let m = map.get(*name)?;
+            for i in 0..w * h {
+                buf.mean[i * buf.channels + c] = m[i];
+            }
+            if let Some(v) = map.get(l.var[c]) {
+                for i in 0..w * h {
+                    buf.var[i * buf.channels + c] = v[i];
+                }
+            }
+        }
+        Some(buf)
+    };
+    let radiance = get(&channels::RADIANCE).ok_or_else(|| Error::image(path, "no R, G, B channels"))?;
+    let attr = |name: &str| layer.attributes.other.get(&Text::from(name));
+    let spp = match attr(channels::ATTR_SPP) {
+        Some(AttributeValue::I32(v)) => *v as u32,
+        _ => 0,
+    };
+    let depth_scale = match attr(channels::ATTR_DEPTH_SCALE) {
+        Some(AttributeValue::F32(v)) => *v,
+        _ => 1.0,
+    };
+    Ok(Frame {
+        width: w as u32,
+        height: h as u32,
+        spp,
+        radiance,
+        diffuse: get(&channels::DIFFUSE),
+        specular: get(&channels::SPECULAR),
+        albedo: get(&channels::ALBEDO),
+        normal: get(&channels::NORMAL),
+        depth: get(&channels::DEPTH),
+        depth_scale,
+        descriptors: None,
+        nonfinite_samples: 0,
+    })
+}

@@ -1,0 +1,3 @@
+pub mod progress;
+pub mod render;
+pub mod font;

@@ -1,0 +1,123 @@
+//! `pixguide render`.
+
+use super::progress;
+use anyhow::{Context, Result};
+use clap::Args;
+use renderer::film::{self, BufferRequest, Frame};
+use renderer::integrator::{self, RenderOptions};
+use renderer::scene::Scene;
+use std::path::{Path, PathBuf};
+
+#[derive(Args)]
+pub struct RenderArgs {
+    /// Scene file (.toml, .gltf, .glb).
+    pub scene: PathBuf,
+    /// Samples per pixel (default: the scene's).
+    #[arg(long)]
+    pub spp: Option<u32>,
+    /// Random seed (default: the scene's). The same seed gives the same image bit for bit.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Maximum bounces (default: the scene's, normally 5).
+    #[arg(long)]
+    pub max_bounces: Option<u32>,
+    /// Output EXR (radiance with variance; with --aovs every buffer).
+    #[arg(short, long, default_value = "out.exr")]
+    pub output: PathBuf,
+    /// Also write a tone-mapped PNG preview here.
+    #[arg(long)]
+    pub png: Option<PathBuf>,
+    /// Exposure of the PNG preview in stops.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub exposure: f32,
+    /// Emit every denoiser input: diffuse/specular split and G-buffers in the EXR, per-sample path
+    /// descriptors in `<output>.descriptors.safetensors`, a PNG of each buffer and a contact sheet.
+    #[arg(long)]
+    pub aovs: bool,
+    /// Don't show the progress bar.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+pub fn run(a: RenderArgs) -> Result<()> {
+    let scene = Scene::load(&a.scene)?;
+    let request = if a.aovs { BufferRequest::ALL } else { BufferRequest::RADIANCE_ONLY };
+    let mut opts = RenderOptions::from_scene(&scene, request);
+    opts.spp = a.spp.unwrap_or(opts.spp);
+    opts.seed = a.seed.unwrap_or(opts.seed);
+    opts.max_bounces = a.max_bounces.unwrap_or(opts.max_bounces);
+
+    let pixels = scene.camera.width as u64 * scene.camera.height as u64;
+    let pb = progress::bar(pixels, &format!("render {}spp", opts.spp));
+    if a.quiet {
+        pb.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let (frame, stats) = integrator::render(&scene, &opts, &|n| pb.set_position(n))?;
+    pb.finish_and_clear();
+    if frame.nonfinite_samples > 0 {
+        eprintln!("warning: {} samples had non-finite radiance and were dropped", frame.nonfinite_samples);
+    }
+
+    film::exr_io::write_frame(&frame, &a.output)?;
+    if let Some(png) = &a.png {
+        film::png::write_radiance(png, frame.width, frame.height, &frame.radiance.mean, a.exposure)?;
+    }
+    if a.aovs {
+        write_aovs(&frame, &a.output, a.exposure)?;
+    }
+    println!("{}: {}x{} at {} spp: {}", a.scene.display(), frame.width, frame.height, frame.spp, stats.summary());
+    Ok(())
+}
+
+fn sibling(output: &Path, suffix: &str) -> PathBuf {
+    let stem = output.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
+    output.with_file_name(format!("{stem}{suffix}"))
+}
+
+/// Descriptor file, one PNG per buffer, and a contact sheet of all of them with labels.
+fn write_aovs(frame: &Frame, output: &Path, exposure: f32) -> Result<()> {
+    if let Some(d) = &frame.descriptors {
+        d.write_safetensors(&sibling(output, ".descriptors.safetensors"))?;
+    }
+    let (w, h) = (frame.width, frame.height);
+    let mut tiles: Vec<(&str, Vec<f32>)> = vec![("radiance", frame.radiance.mean.iter().map(|v| v * 2f32.powf(exposure)).collect())];
+    let mut add = |name: &'static str, buf: &Option<film::PixelBuffer>, signed: bool, radiance: bool| {
+        if let Some(b) = buf {
+            let rgb = if radiance { b.mean.iter().map(|v| v * 2f32.powf(exposure)).collect() } else { film::png::normalised_rgb(&b.mean, b.channels, signed) };
+            tiles.push((name, rgb));
+            tiles.push((Box::leak(format!("{name} variance").into_boxed_str()), film::png::normalised_rgb(&b.var, b.channels, false)));
+        }
+    };
+    add("diffuse", &frame.diffuse, false, true);
+    add("specular", &frame.specular, false, true);
+    add("albedo", &frame.albedo, false, false);
+    add("normal", &frame.normal, true, false);
+    add("depth", &frame.depth, false, false);
+    for (name, rgb) in &tiles {
+        let path = sibling(output, &format!(".{}.png", name.replace(' ', "-")));
+        film::png::write_radiance(&path, w, h, rgb, 0.0).with_context(|| format!("writing {}", path.display()))?;
+    }
+    let sheet = contact_sheet(&tiles, w, h);
+    film::png::write_rgb8(&sibling(output, ".contact.png"), sheet.0, sheet.1, sheet.2)?;
+    Ok(())
+}
+
+/// Lays tiles out 4 per row, each under a label bar drawn with a tiny built-in font.
+fn contact_sheet(tiles: &[(&str, Vec<f32>)], w: u32, h: u32) -> (u32, u32, Vec<u8>) {
+    let cols = 4u32.min(tiles.len() as u32).max(1);
+    let rows = (tiles.len() as u32).div_ceil(cols);
+    let label_h = 12u32;
+    let (sw, sh) = (cols * w, rows * (h + label_h));
+    let mut px = vec![32u8; (sw * sh * 3) as usize];
+    for (k, (name, rgb)) in tiles.iter().enumerate() {
+        let (cx, cy) = ((k as u32 % cols) * w, (k as u32 / cols) * (h + label_h));
+        let rgb8 = film::png::tonemap_rgb8(rgb, 0.0);
+        for y in 0..h {
+            let dst = (((cy + label_h + y) * sw + cx) * 3) as usize;
+            let src = (y * w * 3) as usize;
+            px[dst..dst + (w * 3) as usize].copy_from_slice(&rgb8[src..src + (w * 3) as usize]);
+        }
+        super::font::draw_text(&mut px, sw, cx + 2, cy + 2, name);
+    }
+    (sw, sh, px)
+}
