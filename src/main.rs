@@ -1,6 +1,10 @@
 //! `pixguide`: render scenes, and (soon) denoise them, from one program.
 
+mod alloc_stats;
 mod cli;
+
+#[global_allocator]
+static ALLOC: alloc_stats::Counting = alloc_stats::Counting;
 
 use clap::{Parser, Subcommand};
 
@@ -18,6 +22,8 @@ struct Args {
 enum Command {
     /// Render a scene (.toml, .gltf/.glb) to EXR, with an optional PNG preview.
     Render(cli::render::RenderArgs),
+    /// Measure BVH, integrator and buffer costs; prints ratios against baselines run in the same process.
+    Bench(cli::bench::BenchArgs),
 }
 
 fn main() {
@@ -29,6 +35,7 @@ fn main() {
     }
     let result = match args.command {
         Command::Render(a) => cli::render::run(a),
+        Command::Bench(a) => cli::bench::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -1,3 +1,4 @@
 pub mod progress;
 pub mod render;
 pub mod font;
+pub mod bench;
