@@ -18,6 +18,7 @@ pub mod math;
 pub mod rng;
 pub mod sampling;
 pub mod scene;
+pub mod sky;
 pub mod texture;
 
 pub use error::{Error, Result};

@@ -117,3 +117,14 @@ pub fn read_frame(path: &Path) -> Result<Frame> {
         nonfinite_samples: 0,
     })
 }
+
+/// Writes a linear RGB texture (e.g. an environment map) as a plain `R,G,B` f32 EXR.
+pub fn write_rgb(path: &Path, tex: &crate::texture::Texture) -> Result<()> {
+    let (w, h) = (tex.width as usize, tex.height as usize);
+    let ch = |k: usize| FlatSamples::F32(tex.texels.iter().map(|c| c[k]).collect());
+    let list = vec![AnyChannel::new("R", ch(0)), AnyChannel::new("G", ch(1)), AnyChannel::new("B", ch(2))];
+    let layer = exr::image::Layer::new((w, h), LayerAttributes::default(), Encoding::SMALL_LOSSLESS, AnyChannels::sort(list.into()));
+    let tmp = tmp_path(path);
+    Image::from_layer(layer).write().to_file(&tmp).map_err(|e| Error::image(&tmp, e))?;
+    std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
+}
