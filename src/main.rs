@@ -24,6 +24,8 @@ enum Command {
     Render(cli::render::RenderArgs),
     /// Measure BVH, integrator and buffer costs; prints ratios against baselines run in the same process.
     Bench(cli::bench::BenchArgs),
+    /// Write a procedural sky (Preetham + sun) environment map to EXR.
+    Sky(cli::sky::SkyArgs),
 }
 
 fn main() {
@@ -36,6 +38,7 @@ fn main() {
     let result = match args.command {
         Command::Render(a) => cli::render::run(a),
         Command::Bench(a) => cli::bench::run(a),
+        Command::Sky(a) => cli::sky::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");
