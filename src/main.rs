@@ -26,6 +26,8 @@ enum Command {
     Bench(cli::bench::BenchArgs),
     /// Write a procedural sky (Preetham + sun) environment map to EXR.
     Sky(cli::sky::SkyArgs),
+    /// Generate randomized training shots with references (resumable).
+    Dataset(cli::dataset::DatasetArgs),
 }
 
 fn main() {
@@ -39,6 +41,7 @@ fn main() {
         Command::Render(a) => cli::render::run(a),
         Command::Bench(a) => cli::bench::run(a),
         Command::Sky(a) => cli::sky::run(a),
+        Command::Dataset(a) => cli::dataset::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

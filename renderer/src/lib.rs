@@ -15,6 +15,7 @@ pub mod integrator;
 pub mod light;
 pub mod material;
 pub mod math;
+pub mod randomize;
 pub mod rng;
 pub mod sampling;
 pub mod scene;

@@ -3,3 +3,4 @@ pub mod render;
 pub mod font;
 pub mod bench;
 pub mod sky;
+pub mod dataset;
