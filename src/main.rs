@@ -28,6 +28,8 @@ enum Command {
     Sky(cli::sky::SkyArgs),
     /// Generate randomized training shots with references (resumable).
     Dataset(cli::dataset::DatasetArgs),
+    /// Render the test scenes' high-spp references (resumable).
+    Reference(cli::reference::ReferenceArgs),
 }
 
 fn main() {
@@ -42,6 +44,7 @@ fn main() {
         Command::Bench(a) => cli::bench::run(a),
         Command::Sky(a) => cli::sky::run(a),
         Command::Dataset(a) => cli::dataset::run(a),
+        Command::Reference(a) => cli::reference::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

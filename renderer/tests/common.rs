@@ -41,7 +41,7 @@ pub fn camera(pos: Vec3, target: Vec3, fov: f32, w: u32, h: u32) -> Camera {
 }
 
 pub fn render(scene: &Scene, spp: u32, seed: u64, max_bounces: u32, request: BufferRequest) -> Frame {
-    let opts = RenderOptions { spp, seed, max_bounces, russian_roulette: false, request, crop: None };
+    let opts = RenderOptions { spp, seed, max_bounces, russian_roulette: false, request, crop: None, first_sample: 0 };
     let (frame, _) = integrator::render(scene, &opts, &|_| {}).expect("render succeeds");
     assert!(frame.all_finite(), "frame has non-finite values");
     frame

@@ -4,3 +4,4 @@ pub mod font;
 pub mod bench;
 pub mod sky;
 pub mod dataset;
+pub mod reference;

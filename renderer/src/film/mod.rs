@@ -132,3 +132,73 @@ impl Frame {
             && self.descriptors.as_ref().is_none_or(|d| d.data.iter().all(|v| v.is_finite()))
     }
 }
+
+impl PixelBuffer {
+    /// Merges the statistics of `other` (from `n_other` samples per pixel) into `self` (from
+    /// `n_self`), as if all samples had been accumulated together (Chan et al.'s pairwise update).
+    pub fn merge(&mut self, n_self: u32, other: &PixelBuffer, n_other: u32) {
+        let (na, nb) = (n_self as f64, n_other as f64);
+        let n = na + nb;
+        for i in 0..self.mean.len() {
+            let (ma, mb) = (self.mean[i] as f64, other.mean[i] as f64);
+            let m2a = self.var[i] as f64 * na * (na - 1.0).max(0.0);
+            let m2b = other.var[i] as f64 * nb * (nb - 1.0).max(0.0);
+            let d = mb - ma;
+            let mean = ma + d * nb / n;
+            let m2 = m2a + m2b + d * d * na * nb / n;
+            self.mean[i] = mean as f32;
+            self.var[i] = if n < 2.0 { 0.0 } else { (m2 / (n - 1.0) / n) as f32 };
+        }
+    }
+}
+
+impl Frame {
+    /// Merges a frame of the same size and buffers rendered with other samples (e.g. the next
+    /// chunk of a long reference render). Descriptors are not merged.
+    pub fn merge(&mut self, other: &Frame) -> crate::Result<()> {
+        if (self.width, self.height) != (other.width, other.height) {
+            return Err(crate::Error::Invalid("cannot merge frames of different sizes".into()));
+        }
+        let (na, nb) = (self.spp, other.spp);
+        self.radiance.merge(na, &other.radiance, nb);
+        let pairs = [
+            (&mut self.diffuse, &other.diffuse),
+            (&mut self.specular, &other.specular),
+            (&mut self.albedo, &other.albedo),
+            (&mut self.normal, &other.normal),
+            (&mut self.depth, &other.depth),
+        ];
+        for (a, b) in pairs {
+            match (a.as_mut(), b) {
+                (Some(a), Some(b)) => a.merge(na, b, nb),
+                (None, None) => {}
+                _ => return Err(crate::Error::Invalid("cannot merge frames with different buffers".into())),
+            }
+        }
+        self.spp += other.spp;
+        self.nonfinite_samples += other.nonfinite_samples;
+        self.descriptors = None;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn merged_statistics_equal_one_pass() {
+        let xs: Vec<f32> = (0..37).map(|i| ((i * 7919) % 101) as f32 * 0.1 - 2.0).collect();
+        let stats = |v: &[f32]| {
+            let mut w = Welford::default();
+            v.iter().for_each(|&x| w.push(x));
+            let mut b = PixelBuffer::new(1, 1);
+            b.set(0, &[w]);
+            b
+        };
+        let all = stats(&xs);
+        let mut a = stats(&xs[..10]);
+        a.merge(10, &stats(&xs[10..]), 27);
+        assert!((a.mean[0] - all.mean[0]).abs() < 1e-5 && (a.var[0] - all.var[0]).abs() < 1e-5 * all.var[0].abs().max(1.0), "{a:?} vs {all:?}");
+    }
+}

@@ -26,6 +26,9 @@ pub struct RenderOptions {
     pub request: BufferRequest,
     /// Render only this window of pixels (x0, y0, width, height); the frame has the window's size.
     pub crop: Option<(u32, u32, u32, u32)>,
+    /// Index of the first sample: samples `first_sample..first_sample + spp` are rendered, so a
+    /// long render split into chunks uses exactly the streams of one unsplit render.
+    pub first_sample: u32,
 }
 
 impl RenderOptions {
@@ -38,6 +41,7 @@ impl RenderOptions {
             russian_roulette: scene.settings.russian_roulette,
             request,
             crop: None,
+            first_sample: 0,
         }
     }
 }
@@ -136,7 +140,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
                     let pixel = py as u64 * cw as u64 + px as u64;
                     let li = (ly * tw + lx) as usize;
                     for s in 0..opts.spp {
-                        let mut rng = Pcg32::for_sample(opts.seed, pixel, s as u64);
+                        let mut rng = Pcg32::for_sample(opts.seed, pixel, (opts.first_sample + s) as u64);
                         let film = Vec2::new(px as f32, py as f32) + rng.next_2d();
                         let ray = cam.ray(film);
                         let mut r = path::trace(scene, ray, &mut rng, opts.max_bounces, opts.russian_roulette, req);
