@@ -44,10 +44,6 @@ impl Distribution1D {
         Some(Distribution1D { func, cdf, sum })
     }
 
-    pub fn len(&self) -> usize {
-        self.func.len()
-    }
-
     pub fn func(&self, i: usize) -> f32 {
         self.func[i]
     }

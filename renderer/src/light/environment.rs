@@ -25,9 +25,10 @@
 //! Radiance is looked up bilinearly (wrapping in u, clamped in v so the poles never blend with
 //! the opposite pole). Directions are sampled from a piecewise-constant 2D distribution over the
 //! texels with weight `luminance × sin θ_centre` (pbrt's scheme), where the luminance is the
-//! maximum over the texel's 3 × 3 neighbourhood: bilinear filtering spreads a texel into its
-//! neighbours, and the dilation guarantees a positive pdf wherever the radiance is positive, so a
-//! one-texel sun is found by light sampling in full. The solid-angle density is
+//! mean of the bilinear reconstruction over the texel (¾ own value, ⅛ per neighbour, per axis).
+//! Bilinear filtering spreads a texel into its neighbours; weighting by the filtered mean keeps
+//! the pdf proportional to the energy actually seen and positive wherever the radiance is
+//! positive, so a one-texel sun is found by light sampling in full. The solid-angle density is
 //! `pdf_uv / (2π² sin θ)` with `pdf_uv` the value of the texel cell containing the direction;
 //! [`EnvLight::pdf`] evaluates exactly that, and `sample` reports `pdf(wi)` of the direction it
 //! returns, so the two agree bit for bit.
@@ -82,15 +83,20 @@ impl EnvLight {
                     image.texels.iter().map(|&t| (sanitize(t) * scale).min(Vec3::splat(f32::MAX))).collect();
                 let lum: Vec<f64> = texels.iter().map(|&t| luminance(t) as f64).collect();
                 let sin_row = |y: usize| ((y as f64 + 0.5) / h as f64 * std::f64::consts::PI).sin();
-                let mut weights = vec![0.0f64; w * h];
+                // Mean of the bilinear reconstruction over each texel: per axis the texel keeps ¾ of
+                // its own value and gets ⅛ of each neighbour's (wrapping in u, clamped in v).
+                let mut across = vec![0.0f64; w * h];
                 for y in 0..h {
                     for x in 0..w {
-                        let mut m = 0.0f64;
-                        for yy in y.saturating_sub(1)..=(y + 1).min(h - 1) {
-                            for dx in [w - 1, 0, 1] {
-                                m = m.max(lum[yy * w + (x + dx) % w]);
-                            }
-                        }
+                        let row = &lum[y * w..(y + 1) * w];
+                        across[y * w + x] = 0.75 * row[x] + 0.125 * (row[(x + w - 1) % w] + row[(x + 1) % w]);
+                    }
+                }
+                let mut weights = vec![0.0f64; w * h];
+                for y in 0..h {
+                    let (up, down) = (y.saturating_sub(1), (y + 1).min(h - 1));
+                    for x in 0..w {
+                        let m = 0.75 * across[y * w + x] + 0.125 * (across[up * w + x] + across[down * w + x]);
                         weights[y * w + x] = m * sin_row(y);
                     }
                 }

@@ -154,12 +154,12 @@ fn env_map_lookup_follows_documented_mapping() {
     }
     // Hand-checked: texel (2, 0) of a 4 × 2 map spans map azimuths from +Z (u = ½) to −X
     // (u = ¾) in the upper hemisphere; a +90° turn takes +Z to +X and −X to +Z, so the texel
-    // centre (u = ⅝, θ = 45°) lands at world azimuth 22.5° from +X toward +Z. Unrotated, that
-    // world direction would read texel (1, 0), which is black.
+    // centre (u = ⅝, θ = 45°) lands halfway between world +X and +Z. Unrotated, that world
+    // direction would read texel (1, 0), which is black.
     let mut img = Texture { width: 4, height: 2, texels: vec![Vec3::ZERO; 8] };
     img.texels[2] = Vec3::ONE;
     let l = Lights::build(&Mesh::default(), &[], Environment::Map { image: img, rotation_deg: 90.0, scale: 1.0 });
-    let horizontal = Vec3::new(1.0, 0.0, (PI / 8.0).tan()).normalize();
+    let horizontal = Vec3::new(1.0, 0.0, 1.0).normalize();
     let d = (horizontal + Vec3::Y).normalize();
     assert!((l.env_radiance(d) - Vec3::ONE).abs().max_element() < 1e-3, "{}", l.env_radiance(d));
     let opposite = Vec3::new(-horizontal.x, 1.0, -horizontal.z).normalize();
@@ -168,7 +168,7 @@ fn env_map_lookup_follows_documented_mapping() {
 
 #[test]
 fn env_pdf_covers_every_direction_with_radiance() {
-    // Bilinear lookup spreads the sun into neighbouring texels; the dilated distribution must
+    // Bilinear lookup spreads the sun into neighbouring texels; the filtered distribution must
     // give those directions a positive density or light sampling would miss energy.
     let lights = Lights::build(&Mesh::default(), &[], Environment::Map { image: sun_map(), rotation_deg: 10.0, scale: 1.0 });
     let mut rng = Pcg32::new(5, 9);
