@@ -94,12 +94,12 @@ pub(crate) struct Distribution2D {
 
 impl Distribution2D {
     /// `weights` is row-major, `width × height` long. `None` if nothing is positive.
-    pub fn new(weights: &[f64], width: usize, height: usize) -> Option<Distribution2D> {
+    pub fn new(weights: &[f32], width: usize, height: usize) -> Option<Distribution2D> {
         if width == 0 || height == 0 || weights.len() != width * height {
             return None;
         }
         let rows: Vec<Option<Distribution1D>> =
-            weights.chunks_exact(width).map(|row| Distribution1D::new(row.iter().copied())).collect();
+            weights.chunks_exact(width).map(|row| Distribution1D::new(row.iter().map(|&w| w as f64))).collect();
         let marginal = Distribution1D::new(rows.iter().map(|r| r.as_ref().map_or(0.0, |r| r.sum())))?;
         let total = marginal.sum();
         Some(Distribution2D { width, height, rows, marginal, total })

@@ -37,7 +37,7 @@
 
 use super::distribution::Distribution2D;
 use super::Environment;
-use crate::math::{luminance, PI};
+use crate::math::PI;
 use crate::sampling::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
 use glam::{Vec2, Vec3};
 
@@ -58,6 +58,11 @@ pub(crate) struct EnvMap {
     dist: Distribution2D,
     /// Mean luminance over the sphere (solid-angle weighted).
     mean_luminance: f64,
+}
+
+/// Rec. 709 luminance in f64: texels near f32::MAX would overflow the f32 weighted sum.
+fn luminance64(t: Vec3) -> f64 {
+    0.2126 * t.x as f64 + 0.7152 * t.y as f64 + 0.0722 * t.z as f64
 }
 
 /// Keeps a radiance finite and non-negative.
@@ -81,35 +86,38 @@ impl EnvLight {
                 let scale = if scale.is_finite() && scale > 0.0 { scale } else { 0.0 };
                 let texels: Vec<Vec3> =
                     image.texels.iter().map(|&t| (sanitize(t) * scale).min(Vec3::splat(f32::MAX))).collect();
-                let lum: Vec<f64> = texels.iter().map(|&t| luminance(t) as f64).collect();
+                let mut lum: Vec<f32> = texels.iter().map(|&t| luminance64(t).min(f32::MAX as f64) as f32).collect();
                 let sin_row = |y: usize| ((y as f64 + 0.5) / h as f64 * std::f64::consts::PI).sin();
-                // Mean of the bilinear reconstruction over each texel: per axis the texel keeps ¾ of
-                // its own value and gets ⅛ of each neighbour's (wrapping in u, clamped in v).
-                let mut across = vec![0.0f64; w * h];
-                for y in 0..h {
-                    for x in 0..w {
-                        let row = &lum[y * w..(y + 1) * w];
-                        across[y * w + x] = 0.75 * row[x] + 0.125 * (row[(x + w - 1) % w] + row[(x + 1) % w]);
-                    }
-                }
-                let mut weights = vec![0.0f64; w * h];
-                for y in 0..h {
-                    let (up, down) = (y.saturating_sub(1), (y + 1).min(h - 1));
-                    for x in 0..w {
-                        let m = 0.75 * across[y * w + x] + 0.125 * (across[up * w + x] + across[down * w + x]);
-                        weights[y * w + x] = m * sin_row(y);
-                    }
-                }
-                let Some(dist) = Distribution2D::new(&weights, w, h) else {
-                    return EnvLight::Black;
-                };
                 // Σ L sin θ ΔθΔφ / 4π with Δθ = π/H, Δφ = 2π/W.
                 let mut acc = 0.0f64;
                 for y in 0..h {
-                    acc += lum[y * w..(y + 1) * w].iter().sum::<f64>() * sin_row(y);
+                    acc += texels[y * w..(y + 1) * w].iter().map(|&t| luminance64(t)).sum::<f64>() * sin_row(y);
                 }
                 let mean_luminance = acc * (std::f64::consts::PI / h as f64) * (2.0 * std::f64::consts::PI / w as f64)
                     / (4.0 * std::f64::consts::PI);
+                // Mean of the bilinear reconstruction over each texel: per axis the texel keeps ¾ of
+                // its own value and gets ⅛ of each neighbour's (wrapping in u, clamped in v).
+                // f32 buffers, reused, keep an 8k map's transient memory at 8 bytes per texel.
+                let mut across = vec![0.0f32; w * h];
+                for y in 0..h {
+                    let row = &lum[y * w..(y + 1) * w];
+                    for x in 0..w {
+                        let (l, r) = (row[(x + w - 1) % w] as f64, row[(x + 1) % w] as f64);
+                        across[y * w + x] = (0.75 * row[x] as f64 + 0.125 * (l + r)).min(f32::MAX as f64) as f32;
+                    }
+                }
+                for y in 0..h {
+                    let (up, down) = (y.saturating_sub(1), (y + 1).min(h - 1));
+                    for x in 0..w {
+                        let (a, b) = (across[up * w + x] as f64, across[down * w + x] as f64);
+                        let m = 0.75 * across[y * w + x] as f64 + 0.125 * (a + b);
+                        lum[y * w + x] = (m * sin_row(y)).min(f32::MAX as f64) as f32;
+                    }
+                }
+                drop(across);
+                let Some(dist) = Distribution2D::new(&lum, w, h) else {
+                    return EnvLight::Black;
+                };
                 let rot = if rotation_deg.is_finite() { (rotation_deg as f64).to_radians() } else { 0.0 };
                 EnvLight::Map(Box::new(EnvMap {
                     width: w,
@@ -132,7 +140,7 @@ impl EnvLight {
     pub fn power(&self, r: f32) -> f64 {
         let mean = match self {
             EnvLight::Black => 0.0,
-            EnvLight::Constant(c) => luminance(*c) as f64,
+            EnvLight::Constant(c) => luminance64(*c),
             EnvLight::Map(m) => m.mean_luminance,
         };
         let r = r as f64;

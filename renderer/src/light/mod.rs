@@ -134,7 +134,9 @@ impl Lights {
             let (wi, pdf) = self.env.sample(u)?;
             let pdf = pmf * pdf;
             let radiance = self.env.radiance(wi);
-            return (pdf > 0.0 && pdf.is_finite()).then_some(LightSample { wi, dist: f32::INFINITY, radiance, pdf, prim: None });
+            // A direction between texels can filter to black: not worth a shadow ray.
+            let useful = pdf > 0.0 && pdf.is_finite() && radiance.max_element() > 0.0 && wi.is_finite();
+            return useful.then_some(LightSample { wi, dist: f32::INFINITY, radiance, pdf, prim: None });
         }
         let light = &self.triangles[i];
         let [p0, p1, p2] = mesh.triangle(light.prim as usize);

@@ -132,6 +132,7 @@ fn env_map_sampling_matches_env_pdf_chi_square() {
         dof += 1;
     }
     let crit = chi2_critical((dof - 1) as f64);
+    eprintln!("env chi-square: {chi2:.1} over {} dof (critical {crit:.1})", dof - 1);
     assert!(chi2 < crit, "chi2 = {chi2:.1} over {} dof, critical {crit:.1}", dof - 1);
     // The sun texel sits where the documented mapping says: map column 5 shifted by the rotation.
     let sun_dir = documented_dir(5.5 / 16.0, 2.5 / 8.0, SUN_ROTATION);
@@ -228,6 +229,7 @@ fn env_map_integral_matches_quadrature() {
     }
     for c in 0..3 {
         let (m, se) = mean_and_stderr(&est[c]);
+        eprintln!("env integral channel {c}: MC {m:.5} ± {se:.5}, quadrature {:.5}", reference[c]);
         // 4 standard errors for the MC noise plus 1e-3 relative for the quadrature and f32 sums.
         assert!((m - reference[c]).abs() < 4.0 * se + 1e-3 * reference[c], "channel {c}: {m} vs {} (se {se})", reference[c]);
     }
@@ -271,6 +273,7 @@ fn square_light_plus_env_irradiance_matches_lambert_formula() {
         })
         .collect();
     let (m, se) = mean_and_stderr(&samples);
+    eprintln!("square + env irradiance: MC {m:.5} ± {se:.5}, Lambert formula {want:.5}");
     // 4 standard errors: a correct estimator fails with probability < 1e-4.
     assert!((m - want).abs() < 4.0 * se, "{m} vs {want} (se {se})");
     assert!(se < 0.01 * want, "estimator too noisy to mean anything: se {se}");
@@ -476,5 +479,22 @@ fn black_and_broken_environments_are_not_selectable() {
         let l = Lights::build(&Mesh::default(), &[], Environment::Map { image, rotation_deg: 0.0, scale });
         assert!(l.is_empty());
         assert_eq!(l.env_radiance(Vec3::Y), Vec3::ZERO);
+    }
+}
+
+#[test]
+fn non_finite_random_numbers_never_leak() {
+    let mut mesh = Mesh::default();
+    add_square(&mut mesh, 0.0, 0.0, 1.0, 1.0, 0);
+    let mats = [material(Vec3::ONE, false)];
+    for env in [Environment::Constant(Vec3::ONE), Environment::Map { image: sun_map(), rotation_deg: 5.0, scale: 1.0 }] {
+        let lights = Lights::build(&mesh, &mats, env);
+        for us in [f32::NAN, -1.0, 1.0, 2.0, f32::INFINITY] {
+            for u in [Vec2::splat(f32::NAN), Vec2::splat(-0.5), Vec2::ONE, Vec2::new(f32::INFINITY, 0.5)] {
+                if let Some(s) = lights.sample(&mesh, Vec3::new(0.5, 0.0, 0.5), us, u) {
+                    assert!(s.wi.is_finite() && s.radiance.is_finite() && s.pdf.is_finite() && s.pdf > 0.0, "{us} {u}: {s:?}");
+                }
+            }
+        }
     }
 }
