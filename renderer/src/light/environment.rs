@@ -180,7 +180,7 @@ impl EnvLight {
 }
 
 /// Map-frame direction of texture coordinates (see the module docs).
-pub(crate) fn uv_to_dir(uv: Vec2) -> Vec3 {
+pub fn uv_to_dir(uv: Vec2) -> Vec3 {
     let phi = 2.0 * PI * uv.x;
     let theta = PI * uv.y;
     let (st, ct) = theta.sin_cos();
@@ -189,7 +189,7 @@ pub(crate) fn uv_to_dir(uv: Vec2) -> Vec3 {
 }
 
 /// Texture coordinates of a unit map-frame direction, and sin θ.
-pub(crate) fn dir_to_uv(d: Vec3) -> (Vec2, f32) {
+pub fn dir_to_uv(d: Vec3) -> (Vec2, f32) {
     let theta = d.y.clamp(-1.0, 1.0).acos();
     let mut u = d.x.atan2(-d.z) * (0.5 / PI);
     if u < 0.0 {

@@ -14,7 +14,7 @@
 
 mod area;
 mod distribution;
-mod environment;
+pub mod environment;
 #[cfg(test)]
 mod tests;
 
