@@ -90,9 +90,10 @@ pub fn cube() -> TriMesh {
 }
 
 /// UV sphere of radius `radius`: `segments` (≥ 3) slices around +Y and `max(segments/2, 2)`
-/// stacks. Its vertices lie on the sphere, so its area is slightly below 4πr²: to leading order
-/// the relative deficit is (Δθ² + Δφ²/2)/24 with Δθ = π/stacks, Δφ = 2π/segments (a chord is
-/// shorter than its arc by a factor 1 − Δ²/24); 0.06 % for the default 64 segments.
+/// stacks. Its vertices lie on the sphere, so its area is slightly below 4πr². A flat face of
+/// angular half-sides (a, b) projects onto the sphere with area magnified by 1 + (a² + b²)/2 to
+/// leading order; with a = Δθ/2, b = Δφ·sinθ/2 and sin²θ averaging 2/3 over the sphere, the
+/// relative deficit is (Δθ² + ⅔Δφ²)/8, Δθ = π/stacks, Δφ = 2π/segments: 0.20 % for 64 segments.
 pub fn sphere(radius: f32, segments: u32) -> TriMesh {
     let slices = segments.max(3);
     let stacks = (slices / 2).max(2);
