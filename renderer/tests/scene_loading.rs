@@ -523,7 +523,11 @@ fn gltf_with_out_of_range_accessor_is_an_error_not_a_panic() {
         Ok(_) => panic!("loaded"),
         Err(e) => e.to_string(),
     };
-    assert!(msg.contains("broken.gltf"), "{msg}");
+    assert!(msg.contains("broken.gltf") && msg.contains("accessor 0"), "{msg}");
+    // A node that is its own child must end in an error, not loop or overflow the stack.
+    let json = gltf_json(&uri, buf.len(), offs, &png, true).replacen(r#""children": [1]"#, r#""children": [1, 0]"#, 1);
+    let p = write(&dir, "cyclic.gltf", &json);
+    assert!(load_description(&p).is_err());
 }
 
 // ---------------------------------------------------------------- errors

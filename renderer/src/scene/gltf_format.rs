@@ -88,11 +88,15 @@ pub(crate) fn load(b: &mut Builder, path: &Path, transform: &Mat4, choice: &Mate
     let mut ctx = Ctx { dir, buffers, materials: HashMap::new(), textures: HashMap::new() };
     let mut camera = None;
     let node_count = doc.nodes().count();
-    let mut stack: Vec<(gltf::Node, Mat4, usize)> = scene.nodes().map(|n| (n, *transform, 0)).collect();
+    let mut stack: Vec<(gltf::Node, Mat4)> = scene.nodes().map(|n| (n, *transform)).collect();
     stack.reverse();
-    while let Some((node, parent, depth)) = stack.pop() {
-        if depth > node_count {
-            return Err(fail(b, "the node hierarchy has a cycle".into()));
+    let mut visits = 0usize;
+    while let Some((node, parent)) = stack.pop() {
+        // In a valid file every node has at most one parent, so a tree visits each node once;
+        // more visits mean a cycle or shared children, which could otherwise never terminate.
+        visits += 1;
+        if visits > node_count {
+            return Err(fail(b, "the node hierarchy is not a tree (a node has two parents or is its own ancestor)".into()));
         }
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
         if camera.is_none() {
@@ -127,7 +131,7 @@ pub(crate) fn load(b: &mut Builder, path: &Path, transform: &Mat4, choice: &Mate
         }
         let children: Vec<_> = node.children().collect();
         for child in children.into_iter().rev() {
-            stack.push((child, world, depth + 1));
+            stack.push((child, world));
         }
     }
     Ok(camera)

@@ -161,7 +161,7 @@ pub struct ShapeDef {
 /// Euler angles in degrees `[x, y, z]` (applied about X, then Y, then Z, fixed axes), or an
 /// axis and an angle in degrees.
 #[derive(Deserialize, Debug)]
-#[serde(untagged)]
+#[serde(untagged, expecting = "Euler degrees [x, y, z] or { axis = [x, y, z], angle = degrees }")]
 pub enum Rotate {
     Euler([f32; 3]),
     AxisAngle(AxisAngle),
@@ -175,7 +175,7 @@ pub struct AxisAngle {
 }
 
 #[derive(Deserialize, Debug)]
-#[serde(untagged)]
+#[serde(untagged, expecting = "a number (uniform scale) or [x, y, z]")]
 pub enum Scale {
     Uniform(f32),
     Xyz([f32; 3]),
