@@ -483,10 +483,10 @@ fn glb_with_external_texture_and_no_camera_frames_the_bounds() {
     let (mut buf, offs) = quad_buffer();
     let json = gltf_json("", buf.len(), offs, "green.png", false).replace(r#", "uri": """#, "");
     let mut json = json.into_bytes();
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
-    while buf.len() % 4 != 0 {
+    while !buf.len().is_multiple_of(4) {
         buf.push(0);
     }
     let total = 12 + 8 + json.len() + 8 + buf.len();

@@ -186,7 +186,7 @@ impl Ctx {
                 return Err(Error::scene(&b.file, field, format!("{what} {v} must be finite and non-negative")));
             }
         }
-        if !(ior > 0.0) {
+        if ior <= 0.0 {
             return Err(Error::scene(&b.file, field, "ior must be positive"));
         }
         let alpha = roughness * roughness;

@@ -23,13 +23,19 @@ pub struct MaterialChoice<'a> {
 }
 
 /// Loads `path` (referenced by `field` of the scene), transforms it and appends it to `b`.
+#[allow(clippy::field_reassign_with_default)]
 pub(crate) fn load(b: &mut Builder, path: &Path, transform: &Mat4, choice: &MaterialChoice, field: &str) -> Result<()> {
     let bytes = std::fs::read(path).map_err(|e| Error::scene(&b.file, field, format!("cannot read mesh '{}': {e}", path.display())))?;
     let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
     // The MTL actually read, and the names that could not be found.
     let found_mtl: RefCell<Option<PathBuf>> = RefCell::new(None);
     let missing_mtl: RefCell<Vec<PathBuf>> = RefCell::new(Vec::new());
-    let options = tobj::LoadOptions { triangulate: true, single_index: true, ignore_points: true, ignore_lines: true, ..Default::default() };
+    // Field by field: the struct grows with tobj's optional features.
+    let mut options = tobj::LoadOptions::default();
+    options.triangulate = true;
+    options.single_index = true;
+    options.ignore_points = true;
+    options.ignore_lines = true;
     let (models, materials) = tobj::load_obj_buf(&mut &bytes[..], &options, |mtl: &Path| {
         // Exporters often write the mtllib path relative to somewhere else (McGuire's Cornell box
         // says `scenes/CornellBox-Original.mtl`): fall back to the bare file name beside the OBJ.

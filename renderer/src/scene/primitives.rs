@@ -31,7 +31,7 @@ impl TriMesh {
         let positions = self.positions.iter().map(|&p| m.transform_point3(p)).collect();
         let linear = Mat3::from_mat4(*m);
         let det = linear.determinant();
-        let normals = if self.normals.is_empty() || !(det.abs() > 0.0) || !det.is_finite() {
+        let normals = if self.normals.is_empty() || det == 0.0 || !det.is_finite() {
             // A singular transform has no normal transform; the geometric normal will do.
             Vec::new()
         } else {

@@ -200,7 +200,8 @@ pub struct EnvironmentDef {
 }
 
 /// RGB complex IOR (η, k) of named conductors, integrated from measured spectra to linear sRGB
-/// (the table Tungsten, Mitsuba and Nori use).
+/// (the table Tungsten, Mitsuba and Nori use), digits kept as published.
+#[allow(clippy::excessive_precision)]
 pub const CONDUCTOR_PRESETS: &[(&str, [f32; 3], [f32; 3])] = &[
     ("Ag", [0.1552646489, 0.1167232965, 0.1383806959], [4.8283433224, 3.1222459278, 2.1469504455]),
     ("Al", [1.6574599595, 0.8803689579, 0.5212287346], [9.2238691996, 6.2695232477, 4.8370012281]),
@@ -263,7 +264,7 @@ impl Check<'_> {
         Ok(v)
     }
     fn positive(&self, field: &str, v: f32) -> Result<f32> {
-        if !(self.finite(field, v)? > 0.0) {
+        if self.finite(field, v)? <= 0.0 {
             return Err(self.err(field, format!("{v} must be positive")));
         }
         Ok(v)
