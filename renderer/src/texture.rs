@@ -35,3 +35,38 @@ impl Texture {
         a.lerp(b, fy)
     }
 }
+
+impl Texture {
+    /// Average texel (a constant stand-in where a material parameter cannot vary over a surface).
+    pub fn mean(&self) -> Vec3 {
+        if self.texels.is_empty() {
+            return Vec3::ZERO;
+        }
+        let sum = self.texels.iter().fold(glam::DVec3::ZERO, |acc, t| acc + t.as_dvec3());
+        (sum / self.texels.len() as f64).as_vec3()
+    }
+}
+
+/// The sRGB transfer function inverted (IEC 61966-2-1): an encoded value in [0,1] to linear.
+pub fn srgb_to_linear(v: f32) -> f32 {
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn srgb_decoding_hits_known_points() {
+        assert_eq!(srgb_to_linear(0.0), 0.0);
+        assert!((srgb_to_linear(1.0) - 1.0).abs() < 1e-6);
+        // sRGB 0.5 is 0.214 linear (the familiar "middle grey is 21 %").
+        assert!((srgb_to_linear(0.5) - 0.21404).abs() < 1e-4);
+        // Continuous at the knee.
+        assert!((srgb_to_linear(0.04045) - srgb_to_linear(0.040451)).abs() < 1e-5);
+    }
+}

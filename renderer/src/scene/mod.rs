@@ -11,6 +11,15 @@ use crate::{Error, Result};
 use glam::{Vec2, Vec3};
 use std::path::{Path, PathBuf};
 
+mod builder;
+pub mod gltf_format;
+pub mod image_io;
+pub mod obj;
+pub mod primitives;
+pub mod toml_format;
+
+pub use builder::{MAX_RESOLUTION_PIXELS, MAX_RESOLUTION_SIDE};
+
 /// A colour that is either constant or looked up in a texture (times a scale).
 #[derive(Clone, Debug)]
 pub enum ColorParam {
@@ -178,8 +187,14 @@ impl Scene {
     }
 }
 
-/// Dispatches on the file extension to a loader.
+/// Dispatches on the file extension to a loader: `.toml` (our format, docs/scene-format.md),
+/// `.gltf`/`.glb`.
 pub fn load_description(path: &Path) -> Result<SceneDescription> {
-    let _ = path;
-    todo!("scene helper")
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("toml") => toml_format::load(path),
+        Some("gltf") | Some("glb") => gltf_format::load_scene(path),
+        Some("xml") => Err(Error::scene(path, "file", "Mitsuba XML scenes are not supported yet")),
+        _ => Err(Error::scene(path, "file", "unknown scene format (expected .toml, .gltf or .glb)")),
+    }
 }
