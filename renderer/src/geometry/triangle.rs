@@ -1,0 +1,108 @@
+//! Watertight ray/triangle intersection (Woop, Benthin & Wald 2013, "Watertight Ray/Triangle
+//! Intersection", JCGT 2(1)).
+//!
+//! The ray is sheared so that it runs along +Z through the origin; each edge function is then a
+//! 2D cross product of the sheared vertices. Because a shared edge produces the same edge function
+//! (up to sign) for both triangles that use it, no ray can slip between two triangles sharing an
+//! edge. When an edge function rounds to exactly zero the ray passes (numerically) through the edge
+//! and the three functions are recomputed in f64, which is exact for products of f32 values, so the
+//! tie is broken consistently by both neighbours.
+
+use glam::Vec3;
+
+/// Per-ray constants of the shear transform.
+#[derive(Clone, Copy, Debug)]
+pub struct RayShear {
+    pub origin: Vec3,
+    /// Axis indices: `kz` is the dominant direction axis, `kx`/`ky` the other two, ordered so the
+    /// winding (and thus the sign of the edge functions) is preserved.
+    pub kx: usize,
+    pub ky: usize,
+    pub kz: usize,
+    pub sx: f32,
+    pub sy: f32,
+    pub sz: f32,
+}
+
+impl RayShear {
+    /// `None` for a zero or non-finite direction or origin, which can hit nothing.
+    #[inline]
+    pub fn new(origin: Vec3, dir: Vec3) -> Option<RayShear> {
+        if !origin.is_finite() || !dir.is_finite() {
+            return None;
+        }
+        let a = dir.abs();
+        let kz = if a.x > a.y { if a.x > a.z { 0 } else { 2 } } else if a.y > a.z { 1 } else { 2 };
+        if a[kz] == 0.0 {
+            return None;
+        }
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        if dir[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let sz = 1.0 / dir[kz];
+        Some(RayShear { origin, kx, ky, kz, sx: dir[kx] * sz, sy: dir[ky] * sz, sz })
+    }
+}
+
+/// Intersection of the sheared ray with triangle (p0, p1, p2): `(t, b1, b2)` with t in (0, tmax),
+/// where b1, b2 are the weights of p1 and p2.
+#[inline(always)]
+pub fn intersect(r: &RayShear, p0: Vec3, p1: Vec3, p2: Vec3, tmax: f32) -> Option<(f32, f32, f32)> {
+    let a = p0 - r.origin;
+    let b = p1 - r.origin;
+    let c = p2 - r.origin;
+    let (kx, ky, kz) = (r.kx, r.ky, r.kz);
+    let ax = a[kx] - r.sx * a[kz];
+    let ay = a[ky] - r.sy * a[kz];
+    let bx = b[kx] - r.sx * b[kz];
+    let by = b[ky] - r.sy * b[kz];
+    let cx = c[kx] - r.sx * c[kz];
+    let cy = c[ky] - r.sy * c[kz];
+
+    let mut u = cx * by - cy * bx;
+    let mut v = ax * cy - ay * cx;
+    let mut w = bx * ay - by * ax;
+    if u == 0.0 || v == 0.0 || w == 0.0 {
+        // Products of two f32 are exact in f64, so the sign of each edge function is exact here
+        // and both triangles sharing the edge see the same (opposite-signed) value.
+        let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
+        u = (cx * by - cy * bx) as f32;
+        v = (ax * cy - ay * cx) as f32;
+        w = (bx * ay - by * ax) as f32;
+    }
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return None;
+    }
+    let det = u + v + w;
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let az = r.sz * a[kz];
+    let bz = r.sz * b[kz];
+    let cz = r.sz * c[kz];
+    let t_scaled = u * az + v * bz + w * cz;
+    // Compare before dividing (sign-aware) so a back-facing det never flips the range test.
+    let (ts, d) = if det < 0.0 { (-t_scaled, -det) } else { (t_scaled, det) };
+    if !(ts > 0.0) || !(ts < tmax * d) {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let t = t_scaled * inv;
+    if !(t > 0.0 && t < tmax) {
+        return None;
+    }
+    Some((t, v * inv, w * inv))
+}
+
+/// True when the triangle can never be hit: a non-finite vertex or exactly collinear vertices.
+/// The cross product is taken in f64 so tiny but valid triangles (whose f32 cross product would
+/// underflow) are kept.
+pub fn is_degenerate(p0: Vec3, p1: Vec3, p2: Vec3) -> bool {
+    if !(p0.is_finite() && p1.is_finite() && p2.is_finite()) {
+        return true;
+    }
+    let (a, b, c) = (p0.as_dvec3(), p1.as_dvec3(), p2.as_dvec3());
+    (b - a).cross(c - a) == glam::DVec3::ZERO
+}
