@@ -39,9 +39,10 @@ impl RayBatch {
 
     /// `n` primary rays of a pinhole camera looking at the mesh's bounding-box centre from a
     /// fixed oblique direction (40° vertical field of view, square film, one jittered ray per
-    /// film position). A quarter of them are instead aimed from the same eye exactly at
-    /// triangle vertices and at points on triangle edges (shared edges and quad diagonals),
-    /// where a non-watertight test lets rays through.
+    /// film position). A quarter of them are instead aimed from the same eye exactly at points
+    /// on edges shared by two triangles (quad diagonals included), where a non-watertight test
+    /// lets rays through. Only edges that are not silhouettes as seen from the eye are used: a
+    /// ray grazing a silhouette edge may hit or miss, and both answers are right.
     pub fn camera(mesh: &Mesh, n: usize, seed: u64) -> RayBatch {
         let (lo, hi) = mesh.bounds();
         let centre = (lo + hi) * 0.5;
@@ -61,20 +62,13 @@ impl RayBatch {
             let sy = (1.0 - 2.0 * y / side as f32) * tan_half;
             batch.push(eye, (forward + right * sx + up * sy).normalize(), f32::INFINITY);
         }
-        let valid: Vec<usize> = (0..mesh.triangles.len()).filter(|&i| mesh.area(i) > 0.0).collect();
+        let edges = interior_edges(mesh, eye);
         for _ in n_film..n {
-            let target = if valid.is_empty() {
+            let target = if edges.is_empty() {
                 centre
             } else {
-                let i = valid[rng.below(valid.len() as u32) as usize];
-                let k = rng.below(3) as usize;
-                let [p0, p1, p2] = mesh.triangle(i);
-                let (a, b) = [(p0, p1), (p1, p2), (p2, p0)][k];
-                match rng.below(3) {
-                    0 => a,
-                    1 => a + (b - a) * 0.5,
-                    _ => a + (b - a) * rng.next_f32(),
-                }
+                let (a, b) = edges[rng.below(edges.len() as u32) as usize];
+                if rng.below(2) == 0 { a + (b - a) * 0.5 } else { a + (b - a) * rng.next_f32() }
             };
             let d = (target - eye).normalize_or(forward);
             batch.push(eye, d, f32::INFINITY);
@@ -100,6 +94,42 @@ impl RayBatch {
         }
         batch
     }
+}
+
+/// Edges (as vertex positions) shared by exactly two non-degenerate triangles whose third
+/// vertices lie on opposite sides of the plane through the eye and the edge, so a ray from the
+/// eye through the edge must hit one of the two triangles. Vertices are matched by position,
+/// since OBJ loaders duplicate them per normal/uv.
+fn interior_edges(mesh: &Mesh, eye: Vec3) -> Vec<(Vec3, Vec3)> {
+    use std::collections::HashMap;
+    let key = |p: Vec3| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+    let mut map: HashMap<([u32; 3], [u32; 3]), Vec<(Vec3, Vec3, Vec3)>> = HashMap::new();
+    for i in 0..mesh.triangles.len() {
+        if !(mesh.area(i) > 0.0) {
+            continue;
+        }
+        let p = mesh.triangle(i);
+        for k in 0..3 {
+            let (a, b, c) = (p[k], p[(k + 1) % 3], p[(k + 2) % 3]);
+            let (a, b) = if key(a) < key(b) { (a, b) } else { (b, a) };
+            map.entry((key(a), key(b))).or_default().push((a, b, c));
+        }
+    }
+    let mut edges: Vec<(Vec3, Vec3)> = map
+        .into_values()
+        .filter(|v| v.len() == 2)
+        .filter_map(|v| {
+            let (a, b, c1) = v[0];
+            let c2 = v[1].2;
+            let m = ((a - eye).as_dvec3()).cross((b - eye).as_dvec3());
+            let s1 = m.dot((c1 - eye).as_dvec3());
+            let s2 = m.dot((c2 - eye).as_dvec3());
+            (s1 * s2 < 0.0).then_some((a, b))
+        })
+        .collect();
+    // HashMap order is random per process: sort so the batch is reproducible.
+    edges.sort_by(|x, y| (key(x.0), key(x.1)).cmp(&(key(y.0), key(y.1))));
+    edges
 }
 
 /// Closest hits of every ray of `batch`, on `threads` threads (0 = rayon's global pool).

@@ -78,6 +78,8 @@ fn matches_embree_on_a_million_rays() {
     let (mut total, mut both_hit, mut hit_miss, mut t_off) = (0usize, 0usize, 0usize, 0usize);
     for (k, (name, mesh)) in meshes.iter().enumerate() {
         let accel = Accel::build(mesh);
+        let (lo, hi) = mesh.bounds();
+        let radius = (hi - lo).length();
         for (set, batch) in [("camera", RayBatch::camera(mesh, per_set, k as u64)), ("random", RayBatch::random_in_bounds(mesh, per_set, k as u64))] {
             let ours = trace(&accel, &batch, 0);
             let theirs = embree_trace(&python, &script, &work, mesh, &batch, true).unwrap_or_else(|e| panic!("{name}/{set}: {e}"));
@@ -86,7 +88,9 @@ fn matches_embree_on_a_million_rays() {
                 match (a, b) {
                     (Some(a), Some((prim, t))) => {
                         bh += 1;
-                        if (a.t - t).abs() > 1e-4 * a.t.max(*t) {
+                        // f32 hit distances carry an absolute error of a few ULPs of the scene's
+                        // coordinates, which dominates for rays starting next to a surface.
+                        if (a.t - t).abs() > 1e-4 * a.t.max(*t) + 1e-6 * radius {
                             to += 1;
                             if to <= 3 {
                                 eprintln!("{name}/{set} ray {i} {:?}: ours t={} prim {}, Embree t={t} prim {prim}", batch.ray(i), a.t, a.prim);
@@ -120,3 +124,4 @@ fn matches_embree_on_a_million_rays() {
     // relative). A t disagreement means one of us skipped the nearer triangle: same budget.
     assert!(t_off as f64 <= 1e-4 * total as f64, "{t_off} t disagreements in {total} rays");
 }
+
