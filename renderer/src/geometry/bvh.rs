@@ -31,17 +31,20 @@ const SLAB_WIDEN: f32 = 1.0 / (1 << 20) as f32;
 /// that extend ~1e20 · (distance to the plane) — far beyond any scene.
 const MIN_DIR: f32 = 1e-20;
 
-/// Build parameters, chosen by measurement (see `bench.rs` and the report in the commit log):
-/// obvhs's `medium_build` preset.
+/// Build parameters, chosen by measurement (`examples/ray_bench.rs` with PIXGUIDE_BENCH_PRESETS,
+/// 2 threads): on the bunny (56k) and a 980k-triangle sphere, obvhs's presets from
+/// `very_fast_build` to `slow_build` traced within ±10% of each other (measurement noise on a
+/// shared machine), while `very_fast_build` built fastest (bunny 24 ms vs 33 ms medium; sphere
+/// 0.52 s vs 0.85 s medium, 1.5 s slow).
 pub fn default_build_params() -> BvhBuildParams {
-    BvhBuildParams::medium_build()
+    BvhBuildParams::very_fast_build()
 }
 
 pub struct Bvh {
     cwbvh: CwBvh,
     /// Triangle vertices in BVH leaf order (`cwbvh.primitive_indices` order), so a leaf's
     /// triangles are contiguous in memory.
-    tris: Vec<[Vec3; 3]>,
+    tris: Vec<[Vec3A; 3]>,
     /// Original triangle index (into `Mesh::triangles`) of each entry of `tris`.
     prim_ids: Vec<u32>,
 }
@@ -104,7 +107,7 @@ impl Bvh {
         };
         ReinsertionOptimizer::default().run(&mut bvh2, params.reinsertion_batch_ratio, None);
         let cwbvh = bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf.clamp(1, 3), true, false);
-        let ordered: Vec<[Vec3; 3]> = cwbvh.primitive_indices.iter().map(|&i| tris[i as usize]).collect();
+        let ordered: Vec<[Vec3A; 3]> = cwbvh.primitive_indices.iter().map(|&i| tris[i as usize].map(Vec3A::from)).collect();
         let prim_ids = cwbvh.primitive_indices.iter().map(|&i| valid[i as usize]).collect();
         Bvh { cwbvh, tris: ordered, prim_ids }
     }

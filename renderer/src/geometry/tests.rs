@@ -48,7 +48,7 @@ fn brute_force(mesh: &Mesh, ray: &Ray, tmax: f32) -> Option<(f32, u32)> {
             continue;
         }
         let limit = best.map_or(tmax, |b| b.0);
-        if let Some((t, _, _)) = triangle::intersect(&shear, p0, p1, p2, limit) {
+        if let Some((t, _, _)) = triangle::intersect(&shear, p0.into(), p1.into(), p2.into(), limit) {
             best = Some((t, i as u32));
         }
     }

@@ -8,20 +8,19 @@
 //! and the three functions are recomputed in f64, which is exact for products of f32 values, so the
 //! tie is broken consistently by both neighbours.
 
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
-/// Per-ray constants of the shear transform.
+/// Per-ray constants of the shear transform, as three row vectors: the sheared coordinates of
+/// a point relative to the origin are its dot products with `mx`, `my`, `mz`. Each row has one
+/// 1 (or `sz`), at most one shear factor and a zero, so every dot product equals the paper's
+/// `a[kx] - sx * a[kz]` exactly (adding a zero product is exact); it is computed in SIMD
+/// without branching on the axis permutation.
 #[derive(Clone, Copy, Debug)]
 pub struct RayShear {
-    pub origin: Vec3,
-    /// Axis indices: `kz` is the dominant direction axis, `kx`/`ky` the other two, ordered so the
-    /// winding (and thus the sign of the edge functions) is preserved.
-    pub kx: usize,
-    pub ky: usize,
-    pub kz: usize,
-    pub sx: f32,
-    pub sy: f32,
-    pub sz: f32,
+    pub origin: Vec3A,
+    pub mx: Vec3A,
+    pub my: Vec3A,
+    pub mz: Vec3A,
 }
 
 impl RayShear {
@@ -32,6 +31,8 @@ impl RayShear {
             return None;
         }
         let a = dir.abs();
+        // kz: the dominant axis; kx, ky: the others, swapped for a negative dominant component
+        // so the winding (and thus the sign of the edge functions) is preserved.
         let kz = if a.x > a.y { if a.x > a.z { 0 } else { 2 } } else if a.y > a.z { 1 } else { 2 };
         if a[kz] == 0.0 {
             return None;
@@ -42,24 +43,32 @@ impl RayShear {
             std::mem::swap(&mut kx, &mut ky);
         }
         let sz = 1.0 / dir[kz];
-        Some(RayShear { origin, kx, ky, kz, sx: dir[kx] * sz, sy: dir[ky] * sz, sz })
+        let (sx, sy) = (dir[kx] * sz, dir[ky] * sz);
+        let mut mx = Vec3A::ZERO;
+        mx[kx] = 1.0;
+        mx[kz] = -sx;
+        let mut my = Vec3A::ZERO;
+        my[ky] = 1.0;
+        my[kz] = -sy;
+        let mut mz = Vec3A::ZERO;
+        mz[kz] = sz;
+        Some(RayShear { origin: origin.into(), mx, my, mz })
     }
 }
 
 /// Intersection of the sheared ray with triangle (p0, p1, p2): `(t, b1, b2)` with t in (0, tmax),
 /// where b1, b2 are the weights of p1 and p2.
 #[inline(always)]
-pub fn intersect(r: &RayShear, p0: Vec3, p1: Vec3, p2: Vec3, tmax: f32) -> Option<(f32, f32, f32)> {
+pub fn intersect(r: &RayShear, p0: Vec3A, p1: Vec3A, p2: Vec3A, tmax: f32) -> Option<(f32, f32, f32)> {
     let a = p0 - r.origin;
     let b = p1 - r.origin;
     let c = p2 - r.origin;
-    let (kx, ky, kz) = (r.kx, r.ky, r.kz);
-    let ax = a[kx] - r.sx * a[kz];
-    let ay = a[ky] - r.sy * a[kz];
-    let bx = b[kx] - r.sx * b[kz];
-    let by = b[ky] - r.sy * b[kz];
-    let cx = c[kx] - r.sx * c[kz];
-    let cy = c[ky] - r.sy * c[kz];
+    let ax = a.dot(r.mx);
+    let ay = a.dot(r.my);
+    let bx = b.dot(r.mx);
+    let by = b.dot(r.my);
+    let cx = c.dot(r.mx);
+    let cy = c.dot(r.my);
 
     let mut u = cx * by - cy * bx;
     let mut v = ax * cy - ay * cx;
@@ -79,10 +88,7 @@ pub fn intersect(r: &RayShear, p0: Vec3, p1: Vec3, p2: Vec3, tmax: f32) -> Optio
     if det == 0.0 || !det.is_finite() {
         return None;
     }
-    let az = r.sz * a[kz];
-    let bz = r.sz * b[kz];
-    let cz = r.sz * c[kz];
-    let t_scaled = u * az + v * bz + w * cz;
+    let t_scaled = u * a.dot(r.mz) + v * b.dot(r.mz) + w * c.dot(r.mz);
     // Compare before dividing (sign-aware) so a back-facing det never flips the range test.
     let (ts, d) = if det < 0.0 { (-t_scaled, -det) } else { (t_scaled, det) };
     if !(ts > 0.0) || !(ts < tmax * d) {
