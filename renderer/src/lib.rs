@@ -7,6 +7,7 @@
 //!   surface;
 //! - every error a user can cause is an [`Error`] naming the file and the field or line.
 
+pub mod bench;
 pub mod camera;
 pub mod error;
 pub mod film;

@@ -1,6 +1,11 @@
 //! Triangle geometry and ray queries: one obvhs CWBVH over every triangle of the scene,
 //! a watertight ray/triangle test, and robust ray-origin offsets.
 
+pub mod bvh;
+pub mod triangle;
+#[cfg(test)]
+mod tests;
+
 use crate::math::Ray;
 use glam::{Vec2, Vec3};
 
@@ -66,35 +71,87 @@ pub struct Hit {
 
 /// The ray-query structure over a [`Mesh`].
 pub struct Accel {
-    _private: (),
+    bvh: bvh::Bvh,
 }
 
 impl Accel {
     /// Builds the BVH (in parallel). Degenerate triangles are kept in the mesh but can never be hit.
     pub fn build(mesh: &Mesh) -> Accel {
-        let _ = mesh;
-        todo!("geometry helper")
+        Accel::build_with(mesh, bvh::default_build_params())
+    }
+
+    /// [`Accel::build`] with explicit obvhs build parameters (for benchmarking the presets).
+    pub fn build_with(mesh: &Mesh, params: obvhs::BvhBuildParams) -> Accel {
+        let n = mesh.positions.len();
+        // Triangles with an out-of-range index, a non-finite vertex or zero area are left out
+        // of the BVH entirely, so no traversal or build step ever sees them.
+        let (tris, valid): (Vec<[Vec3; 3]>, Vec<u32>) = mesh
+            .triangles
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.iter().all(|&v| (v as usize) < n))
+            .map(|(i, t)| ([mesh.positions[t[0] as usize], mesh.positions[t[1] as usize], mesh.positions[t[2] as usize]], i as u32))
+            .filter(|(p, _)| !triangle::is_degenerate(p[0], p[1], p[2]))
+            .unzip();
+        Accel { bvh: bvh::Bvh::build(tris, valid, params) }
+    }
+
+    /// Number of CWBVH nodes (0 for a mesh without a single valid triangle).
+    pub fn node_count(&self) -> usize {
+        self.bvh.node_count()
     }
 
     /// Closest hit with t in (0, tmax).
+    #[inline]
     pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<Hit> {
-        let _ = (ray, tmax);
-        todo!("geometry helper")
+        self.bvh
+            .intersect(ray.origin, ray.dir, tmax)
+            .map(|(t, prim, b1, b2)| Hit { t, prim, bary: Vec2::new(b1, b2) })
     }
 
     /// Any hit with t in (0, tmax) (shadow rays).
+    #[inline]
     pub fn occluded(&self, ray: &Ray, tmax: f32) -> bool {
-        let _ = (ray, tmax);
-        todo!("geometry helper")
+        self.bvh.occluded(ray.origin, ray.dir, tmax)
     }
 }
+
+/// Integer ULP steps per unit of normal for coordinates far from zero (Wächter & Binder).
+const INT_SCALE: f32 = 256.0;
+/// Below this fraction of |p|∞ a coordinate's own ULPs are too fine to step over the rounding
+/// error of the other coordinates, so it gets a float offset instead.
+const ORIGIN_FRACTION: f32 = 1.0 / 32.0;
+/// Float offset in units of |p|∞ for such coordinates. Wächter & Binder use a fixed 2^-16 below a
+/// fixed |p_i| < 1/32; that is 1.5% of a scene of size 1e-3, so both are made relative to |p|∞
+/// (identical to the paper for |p|∞ = 1).
+const FLOAT_SCALE: f32 = 1.0 / 65536.0;
+/// |p|∞ floor so a point at the exact origin still moves (about 1e-5 of a 1e-3-sized scene).
+const MIN_MAGNITUDE: f32 = 1e-8;
 
 /// Moves `p` off the surface along the geometric normal `ng` on the side of `dir`, by an amount
 /// that scales with |p| (Wächter & Binder, Ray Tracing Gems ch. 6), so spawned rays neither
 /// re-hit their own triangle nor tunnel through thin geometry at scene scales from 1e-3 to 1e4.
 pub fn offset_ray_origin(p: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
-    let _ = (p, ng, dir);
-    todo!("geometry helper")
+    if !p.is_finite() || !ng.is_finite() {
+        return p;
+    }
+    let n = if ng.dot(dir) < 0.0 { -ng } else { ng };
+    let mag = p.abs().max_element().max(MIN_MAGNITUDE);
+    let mut out = p;
+    for i in 0..3 {
+        let pi = p[i];
+        out[i] = if pi.abs() < mag * ORIGIN_FRACTION {
+            pi + FLOAT_SCALE * mag * n[i]
+        } else {
+            // Stepping the bit pattern moves by whole ULPs whatever the magnitude; the step is
+            // applied away from zero when n_i points away from zero, towards it otherwise.
+            let steps = (INT_SCALE * n[i]) as i32;
+            let bits = pi.to_bits() as i32;
+            let stepped = f32::from_bits(if pi < 0.0 { bits - steps } else { bits + steps } as u32);
+            if stepped.is_finite() { stepped } else { pi }
+        };
+    }
+    out
 }
 
 impl Mesh {

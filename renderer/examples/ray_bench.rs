@@ -1,0 +1,82 @@
+//! Release-mode ray benchmark against Embree on the shipped meshes and a displaced sphere:
+//! `cargo run --release -p renderer --example ray_bench [threads] [robust]`.
+//! Also compares obvhs build presets (build time vs rays/s) when PIXGUIDE_BENCH_PRESETS is set.
+
+use glam::Vec3;
+use renderer::bench::{embree_python, embree_script, ray_bench, trace, EmbreeSetup, RayBatch};
+use renderer::geometry::{Accel, Mesh};
+use std::path::Path;
+use std::time::Instant;
+
+fn load_obj(path: &Path) -> Mesh {
+    let (models, _) = tobj::load_obj(path, &tobj::GPU_LOAD_OPTIONS).expect("obj loads");
+    let mut mesh = Mesh::default();
+    for m in models {
+        let p: Vec<Vec3> = m.mesh.positions.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
+        let t: Vec<[u32; 3]> = m.mesh.indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        mesh.append(&p, &[], &[], &t, 0);
+    }
+    mesh
+}
+
+fn sphere(n: u32, m: u32) -> Mesh {
+    let mut positions = Vec::new();
+    for j in 0..=n {
+        let th = std::f32::consts::PI * j as f32 / n as f32;
+        for i in 0..=m {
+            let ph = std::f32::consts::TAU * i as f32 / m as f32;
+            let r = 1.0 + 0.08 * (5.0 * th).sin() * (7.0 * ph).cos();
+            positions.push(Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin()) * r);
+        }
+    }
+    let idx = |i: u32, j: u32| j * (m + 1) + i;
+    let mut tris = Vec::new();
+    for j in 0..n {
+        for i in 0..m {
+            tris.extend([[idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)], [idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]]);
+        }
+    }
+    let mut mesh = Mesh::default();
+    mesh.append(&positions, &[], &[], &tris, 0);
+    mesh
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let threads: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(2);
+    let robust = args.iter().any(|a| a == "robust");
+    let ws = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf();
+    let python = embree_python(&ws.join("target/embree-venv")).expect("embree venv");
+    let setup = EmbreeSetup { python, script: embree_script(&ws), work_dir: ws.join("target/embree-bench"), robust };
+    let meshes = [
+        ("cornell-box-mcguire", load_obj(&ws.join("scenes/assets/cornell-box-mcguire/CornellBox-Original.obj"))),
+        ("stanford-bunny", load_obj(&ws.join("scenes/assets/stanford-bunny/bunny.obj"))),
+        ("sphere-1M", sphere(700, 700)),
+    ];
+    for (name, mesh) in &meshes {
+        let cam = RayBatch::camera(mesh, 500_000, 1);
+        let rnd = RayBatch::random_in_bounds(mesh, 500_000, 2);
+        if std::env::var_os("PIXGUIDE_BENCH_PRESETS").is_some() {
+            for (pname, p) in [
+                ("fastest", obvhs::BvhBuildParams::fastest_build()),
+                ("very_fast", obvhs::BvhBuildParams::very_fast_build()),
+                ("fast", obvhs::BvhBuildParams::fast_build()),
+                ("medium", obvhs::BvhBuildParams::medium_build()),
+                ("slow", obvhs::BvhBuildParams::slow_build()),
+            ] {
+                let t0 = Instant::now();
+                let accel = Accel::build_with(mesh, p);
+                let b = t0.elapsed().as_secs_f64();
+                let mut rates = Vec::new();
+                for batch in [&cam, &rnd] {
+                    let t0 = Instant::now();
+                    let _ = trace(&accel, batch, threads);
+                    rates.push(batch.len() as f64 / t0.elapsed().as_secs_f64() * 1e-6);
+                }
+                println!("{name} preset {pname:<10} build {:>7.1} ms, camera {:.2} Mrays/s, random {:.2} Mrays/s", b * 1e3, rates[0], rates[1]);
+            }
+        }
+        let report = ray_bench(mesh, &[("camera", &cam), ("random", &rnd)], threads, 3, Some(&setup)).expect("bench runs");
+        println!("== {name} (Embree {})\n{report}", if robust { "robust" } else { "fast" });
+    }
+}

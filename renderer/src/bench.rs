@@ -1,0 +1,382 @@
+//! Ray-tracing benchmark: BVH build time and closest-hit rays/s on camera rays and on random
+//! rays, next to Embree's rays/s on the very same rays (through the embreex Python binding and
+//! `tools/embree/trace.py`). Also the plumbing the Embree cross-check test uses.
+
+use crate::geometry::{Accel, Hit, Mesh};
+use crate::math::Ray;
+use crate::rng::Pcg32;
+use crate::{Error, Result};
+use glam::Vec3;
+use rayon::prelude::*;
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+/// A set of rays in structure-of-arrays form (the layout the Embree helper reads).
+#[derive(Clone, Debug, Default)]
+pub struct RayBatch {
+    pub origins: Vec<Vec3>,
+    pub dirs: Vec<Vec3>,
+    pub tmax: Vec<f32>,
+}
+
+impl RayBatch {
+    pub fn len(&self) -> usize {
+        self.origins.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.origins.is_empty()
+    }
+    pub fn push(&mut self, o: Vec3, d: Vec3, tmax: f32) {
+        self.origins.push(o);
+        self.dirs.push(d);
+        self.tmax.push(tmax);
+    }
+    pub fn ray(&self, i: usize) -> Ray {
+        Ray::new(self.origins[i], self.dirs[i])
+    }
+
+    /// `n` primary rays of a pinhole camera looking at the mesh's bounding-box centre from a
+    /// fixed oblique direction (40° vertical field of view, square film, one jittered ray per
+    /// film position). A quarter of them are instead aimed from the same eye exactly at points
+    /// on edges shared by two triangles (quad diagonals included), where a non-watertight test
+    /// lets rays through. Only edges that are not silhouettes as seen from the eye are used: a
+    /// ray grazing a silhouette edge may hit or miss, and both answers are right.
+    pub fn camera(mesh: &Mesh, n: usize, seed: u64) -> RayBatch {
+        let (lo, hi) = mesh.bounds();
+        let centre = (lo + hi) * 0.5;
+        let radius = ((hi - lo).length() * 0.5).max(1e-20);
+        let eye = centre + Vec3::new(0.45, 0.35, 1.0).normalize() * (radius * 2.6);
+        let forward = (centre - eye).normalize();
+        let right = forward.cross(Vec3::Y).normalize_or(Vec3::X);
+        let up = right.cross(forward);
+        let tan_half = (20.0f32).to_radians().tan();
+        let side = ((n as f64 * 0.75).sqrt().ceil() as usize).max(1);
+        let mut rng = Pcg32::new(seed, 11);
+        let mut batch = RayBatch::default();
+        let n_film = n - n / 4;
+        for i in 0..n_film {
+            let (x, y) = ((i % side) as f32 + rng.next_f32(), ((i / side) % side) as f32 + rng.next_f32());
+            let sx = (2.0 * x / side as f32 - 1.0) * tan_half;
+            let sy = (1.0 - 2.0 * y / side as f32) * tan_half;
+            batch.push(eye, (forward + right * sx + up * sy).normalize(), f32::INFINITY);
+        }
+        let edges = interior_edges(mesh, eye);
+        for _ in n_film..n {
+            let target = if edges.is_empty() {
+                centre
+            } else {
+                let (a, b) = edges[rng.below(edges.len() as u32) as usize];
+                if rng.below(2) == 0 { a + (b - a) * 0.5 } else { a + (b - a) * rng.next_f32() }
+            };
+            let d = (target - eye).normalize_or(forward);
+            batch.push(eye, d, f32::INFINITY);
+        }
+        batch
+    }
+
+    /// `n` rays from a uniformly random point of the (slightly enlarged) bounding box towards
+    /// another, unbounded beyond it: incoherent rays like those of later path bounces.
+    pub fn random_in_bounds(mesh: &Mesh, n: usize, seed: u64) -> RayBatch {
+        let (lo, hi) = mesh.bounds();
+        let pad = (hi - lo) * 0.05;
+        let (lo, ext) = (lo - pad, (hi - lo) + pad * 2.0);
+        let mut rng = Pcg32::new(seed, 12);
+        let mut batch = RayBatch::default();
+        while batch.len() < n {
+            let a = lo + ext * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+            let b = lo + ext * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+            let d = (b - a).normalize_or_zero();
+            if d != Vec3::ZERO {
+                batch.push(a, d, f32::INFINITY);
+            }
+        }
+        batch
+    }
+}
+
+/// Edges (as vertex positions) shared by exactly two non-degenerate triangles whose third
+/// vertices lie on opposite sides of the plane through the eye and the edge, so a ray from the
+/// eye through the edge must hit one of the two triangles. Vertices are matched by position,
+/// since OBJ loaders duplicate them per normal/uv.
+fn interior_edges(mesh: &Mesh, eye: Vec3) -> Vec<(Vec3, Vec3)> {
+    use std::collections::HashMap;
+    let key = |p: Vec3| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+    let mut map: HashMap<([u32; 3], [u32; 3]), Vec<(Vec3, Vec3, Vec3)>> = HashMap::new();
+    for i in 0..mesh.triangles.len() {
+        if !(mesh.area(i) > 0.0) {
+            continue;
+        }
+        let p = mesh.triangle(i);
+        for k in 0..3 {
+            let (a, b, c) = (p[k], p[(k + 1) % 3], p[(k + 2) % 3]);
+            let (a, b) = if key(a) < key(b) { (a, b) } else { (b, a) };
+            map.entry((key(a), key(b))).or_default().push((a, b, c));
+        }
+    }
+    let mut edges: Vec<(Vec3, Vec3)> = map
+        .into_values()
+        .filter(|v| v.len() == 2)
+        .filter_map(|v| {
+            let (a, b, c1) = v[0];
+            let c2 = v[1].2;
+            let m = ((a - eye).as_dvec3()).cross((b - eye).as_dvec3());
+            let s1 = m.dot((c1 - eye).as_dvec3());
+            let s2 = m.dot((c2 - eye).as_dvec3());
+            (s1 * s2 < 0.0).then_some((a, b))
+        })
+        .collect();
+    // HashMap order is random per process: sort so the batch is reproducible.
+    edges.sort_by(|x, y| (key(x.0), key(x.1)).cmp(&(key(y.0), key(y.1))));
+    edges
+}
+
+/// Closest hits of every ray of `batch`, on `threads` threads (0 = rayon's global pool).
+pub fn trace(accel: &Accel, batch: &RayBatch, threads: usize) -> Vec<Option<Hit>> {
+    let run = || {
+        (0..batch.len()).into_par_iter().with_min_len(1024).map(|i| accel.intersect(&batch.ray(i), batch.tmax[i])).collect()
+    };
+    if threads == 0 {
+        run()
+    } else {
+        match rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
+            Ok(pool) => pool.install(run),
+            Err(_) => run(),
+        }
+    }
+}
+
+/// Embree's answer for each ray: primitive index and t, and its query / build times.
+pub struct EmbreeResult {
+    pub hits: Vec<Option<(u32, f32)>>,
+    pub query_seconds: f64,
+    pub build_seconds: f64,
+}
+
+/// Location of the Python helper, relative to the workspace root.
+pub fn embree_script(workspace: &Path) -> PathBuf {
+    workspace.join("tools/embree/trace.py")
+}
+
+/// Returns the Python interpreter of the venv at `venv` with embreex and numpy installed,
+/// creating the venv (python3 -m venv; pip install embreex numpy) if it does not work yet.
+pub fn embree_python(venv: &Path) -> Result<PathBuf> {
+    let python = venv.join("bin/python");
+    let works = |py: &Path| {
+        Command::new(py).args(["-c", "import embreex.rtcore_scene, numpy"]).output().map(|o| o.status.success()).unwrap_or(false)
+    };
+    if python.exists() && works(&python) {
+        return Ok(python);
+    }
+    let fail = |what: &str, detail: String| Error::Invalid(format!("Embree venv {}: {what}: {detail}", venv.display()));
+    let out = Command::new("python3").arg("-m").arg("venv").arg(venv).output().map_err(|e| fail("python3 -m venv", e.to_string()))?;
+    if !out.status.success() {
+        return Err(fail("python3 -m venv failed", String::from_utf8_lossy(&out.stderr).into_owned()));
+    }
+    let out = Command::new(venv.join("bin/pip"))
+        .args(["install", "--quiet", "--disable-pip-version-check", "embreex", "numpy"])
+        .output()
+        .map_err(|e| fail("pip install embreex numpy", e.to_string()))?;
+    if !out.status.success() {
+        return Err(fail("pip install embreex numpy failed", String::from_utf8_lossy(&out.stderr).into_owned()));
+    }
+    if !works(&python) {
+        return Err(fail("embreex installed but does not import", String::new()));
+    }
+    Ok(python)
+}
+
+/// Traces `batch` against `mesh` with Embree via `script`, exchanging binary files in `work_dir`.
+/// Primitive ids are indices into `mesh.triangles`. `robust` sets Embree's robust scene flag
+/// (watertight, slower).
+pub fn embree_trace(python: &Path, script: &Path, work_dir: &Path, mesh: &Mesh, batch: &RayBatch, robust: bool) -> Result<EmbreeResult> {
+    std::fs::create_dir_all(work_dir).map_err(|e| Error::io(work_dir, e))?;
+    let tag = format!("{}-{}", std::process::id(), batch.len());
+    let input = work_dir.join(format!("rays-{tag}.bin"));
+    let output = work_dir.join(format!("hits-{tag}.bin"));
+    let n_tris = mesh.triangles.len();
+    let mut buf: Vec<u8> = Vec::with_capacity(24 + n_tris * 36 + batch.len() * 28);
+    buf.extend_from_slice(b"PGRT0001");
+    buf.extend_from_slice(&(n_tris as u64).to_le_bytes());
+    buf.extend_from_slice(&(batch.len() as u64).to_le_bytes());
+    let mut put = |v: f32| buf.extend_from_slice(&v.to_le_bytes());
+    for i in 0..n_tris {
+        for p in mesh.triangle(i) {
+            // Embree rejects non-finite vertices; such triangles can never be hit anyway.
+            let p = if p.is_finite() { p } else { Vec3::ZERO };
+            put(p.x);
+            put(p.y);
+            put(p.z);
+        }
+    }
+    for v in batch.origins.iter().chain(&batch.dirs) {
+        put(v.x);
+        put(v.y);
+        put(v.z);
+    }
+    for &t in &batch.tmax {
+        // Embree wants a finite tfar for a ray segment; 1e37 is its "unbounded" idiom too.
+        put(t.min(1e37));
+    }
+    std::fs::write(&input, &buf).map_err(|e| Error::io(&input, e))?;
+    let out = Command::new(python).arg(script).arg(&input).arg(&output).arg(if robust { "robust" } else { "fast" }).output().map_err(|e| Error::io(script, e))?;
+    let _ = std::fs::remove_file(&input);
+    if !out.status.success() {
+        return Err(Error::Invalid(format!("{} failed: {}", script.display(), String::from_utf8_lossy(&out.stderr))));
+    }
+    let data = std::fs::read(&output).map_err(|e| Error::io(&output, e))?;
+    let _ = std::fs::remove_file(&output);
+    let n = batch.len();
+    let bad = |m: &str| Error::scene(&output, "contents", m.to_string());
+    if data.len() != 32 + n * 8 || &data[..8] != b"PGRH0001" {
+        return Err(bad("unexpected size or magic"));
+    }
+    let u64_at = |o: usize| u64::from_le_bytes(data[o..o + 8].try_into().unwrap());
+    if u64_at(8) as usize != n {
+        return Err(bad("ray count differs"));
+    }
+    let query_seconds = f64::from_bits(u64_at(16));
+    let build_seconds = f64::from_bits(u64_at(24));
+    let hits = (0..n)
+        .map(|i| {
+            let o = 32 + i * 4;
+            let prim = i32::from_le_bytes(data[o..o + 4].try_into().unwrap());
+            let o = 32 + n * 4 + i * 4;
+            let t = f32::from_le_bytes(data[o..o + 4].try_into().unwrap());
+            (prim >= 0).then_some((prim as u32, t))
+        })
+        .collect();
+    Ok(EmbreeResult { hits, query_seconds, build_seconds })
+}
+
+/// Figures for one ray set.
+#[derive(Clone, Debug)]
+pub struct RaySetReport {
+    pub name: String,
+    pub rays: usize,
+    pub hit_fraction: f64,
+    /// Our closest-hit rays/s on `threads` threads and on one thread.
+    pub ours_mt: f64,
+    pub ours_1t: f64,
+    /// Embree's single-thread rays/s (embreex loops rtcIntersect1 on one thread).
+    pub embree_1t: Option<f64>,
+}
+
+#[derive(Clone, Debug)]
+pub struct RayBenchReport {
+    pub triangles: usize,
+    pub threads: usize,
+    pub build_seconds: f64,
+    pub bvh_nodes: usize,
+    pub embree_build_seconds: Option<f64>,
+    pub sets: Vec<RaySetReport>,
+}
+
+/// Where Embree lives, if it should be run.
+pub struct EmbreeSetup {
+    pub python: PathBuf,
+    pub script: PathBuf,
+    pub work_dir: PathBuf,
+    /// Embree's robust (watertight) mode instead of its fastest one.
+    pub robust: bool,
+}
+
+/// Builds the BVH of `mesh` (timed; the best of three builds), then traces each ray set with
+/// `threads` threads and with one (best of `repeats` runs each), and with Embree if `embree` is
+/// given. Rays/s count closest-hit queries only.
+pub fn ray_bench(mesh: &Mesh, sets: &[(&str, &RayBatch)], threads: usize, repeats: usize, embree: Option<&EmbreeSetup>) -> Result<RayBenchReport> {
+    let threads = threads.max(1);
+    let pool = |n: usize| rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| Error::Invalid(e.to_string()));
+    let pool_mt = pool(threads)?;
+    let pool_1t = pool(1)?;
+    let mut build_seconds = f64::INFINITY;
+    let mut accel = None;
+    for _ in 0..3 {
+        let t0 = Instant::now();
+        let a = pool_mt.install(|| Accel::build(mesh));
+        build_seconds = build_seconds.min(t0.elapsed().as_secs_f64());
+        accel = Some(a);
+    }
+    let accel = accel.expect("built three times");
+    let best_rate = |p: &rayon::ThreadPool, batch: &RayBatch| {
+        let mut best = 0.0f64;
+        let mut hits = 0usize;
+        for _ in 0..repeats.max(1) {
+            let t0 = Instant::now();
+            let r: Vec<Option<Hit>> = p.install(|| trace(&accel, batch, 0));
+            let s = t0.elapsed().as_secs_f64();
+            hits = r.iter().filter(|h| h.is_some()).count();
+            best = best.max(batch.len() as f64 / s);
+        }
+        (best, hits)
+    };
+    let mut reports = Vec::new();
+    let mut embree_build = None;
+    for (name, batch) in sets {
+        let (ours_mt, hits) = best_rate(&pool_mt, batch);
+        let (ours_1t, _) = best_rate(&pool_1t, batch);
+        let embree_1t = match embree {
+            Some(e) => {
+                let mut best = 0.0f64;
+                for _ in 0..repeats.max(1) {
+                    let r = embree_trace(&e.python, &e.script, &e.work_dir, mesh, batch, e.robust)?;
+                    best = best.max(batch.len() as f64 / r.query_seconds);
+                    embree_build = Some(embree_build.map_or(r.build_seconds, |b: f64| b.min(r.build_seconds)));
+                }
+                Some(best)
+            }
+            None => None,
+        };
+        reports.push(RaySetReport {
+            name: name.to_string(),
+            rays: batch.len(),
+            hit_fraction: hits as f64 / batch.len().max(1) as f64,
+            ours_mt,
+            ours_1t,
+            embree_1t,
+        });
+    }
+    Ok(RayBenchReport {
+        triangles: mesh.triangles.len(),
+        threads,
+        build_seconds,
+        bvh_nodes: accel.node_count(),
+        embree_build_seconds: embree_build,
+        sets: reports,
+    })
+}
+
+impl fmt::Display for RayBenchReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "{} triangles: BVH build {:.1} ms on {} threads ({} CWBVH nodes)", self.triangles, self.build_seconds * 1e3, self.threads, self.bvh_nodes)?;
+        if let Some(b) = self.embree_build_seconds {
+            writeln!(f, "  Embree scene build {:.1} ms (embreex default: TBB threads)", b * 1e3)?;
+        }
+        for s in &self.sets {
+            write!(
+                f,
+                "  {:<8} {:>8} rays, {:>5.1}% hit: ours {:>6.2} Mrays/s ({}t), {:>6.2} Mrays/s (1t)",
+                s.name,
+                s.rays,
+                s.hit_fraction * 100.0,
+                s.ours_mt * 1e-6,
+                self.threads,
+                s.ours_1t * 1e-6
+            )?;
+            if let Some(e) = s.embree_1t {
+                write!(
+                    f,
+                    "; Embree {:>6.2} Mrays/s (1t); ours/Embree 1t {:.2}x, ours {}t / (Embree 1t x {}) {:.2}x",
+                    e * 1e-6,
+                    s.ours_1t / e,
+                    self.threads,
+                    self.threads,
+                    s.ours_mt / (e * self.threads as f64)
+                )?;
+            }
+            writeln!(f)?;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,285 @@
+use super::*;
+use crate::rng::Pcg32;
+
+fn rand3(rng: &mut Pcg32) -> Vec3 {
+    Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32())
+}
+
+fn mesh_from(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Mesh {
+    let material = vec![0; triangles.len()];
+    Mesh { positions, normals: Vec::new(), uvs: Vec::new(), triangles, material }
+}
+
+/// A grid of n×n quads over [0,1]² (two triangles per quad, alternating diagonals), with a
+/// height field so edges are neither axis-aligned nor coplanar. Its slope stays below 0.25, so
+/// a ray steeper than that can have no silhouette edge to graze past.
+fn grid(n: u32, scale: f32, offset: Vec3) -> Mesh {
+    let mut positions = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (x, y) = (i as f32 / n as f32, j as f32 / n as f32);
+            let z = 0.03 * (7.0 * x).sin() * (5.0 * y).cos();
+            positions.push(offset + scale * Vec3::new(x, y, z));
+        }
+    }
+    let mut triangles = Vec::new();
+    let idx = |i: u32, j: u32| j * (n + 1) + i;
+    for j in 0..n {
+        for i in 0..n {
+            let (a, b, c, d) = (idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1));
+            if (i + j) % 2 == 0 {
+                triangles.push([a, b, c]);
+                triangles.push([a, c, d]);
+            } else {
+                triangles.push([a, b, d]);
+                triangles.push([b, c, d]);
+            }
+        }
+    }
+    mesh_from(positions, triangles)
+}
+
+fn brute_force(mesh: &Mesh, ray: &Ray, tmax: f32) -> Option<(f32, u32)> {
+    let shear = triangle::RayShear::new(ray.origin, ray.dir)?;
+    let mut best: Option<(f32, u32)> = None;
+    for i in 0..mesh.triangles.len() {
+        let [p0, p1, p2] = mesh.triangle(i);
+        if triangle::is_degenerate(p0, p1, p2) {
+            continue;
+        }
+        let limit = best.map_or(tmax, |b| b.0);
+        if let Some((t, _, _)) = triangle::intersect(&shear, p0.into(), p1.into(), p2.into(), limit) {
+            best = Some((t, i as u32));
+        }
+    }
+    best
+}
+
+#[test]
+fn closest_hit_matches_brute_force() {
+    let mut rng = Pcg32::new(1, 0);
+    // Random soup (many overlaps, so "closest" matters) plus a grid (shared edges).
+    let mut mesh = grid(6, 1.0, Vec3::ZERO);
+    for _ in 0..300 {
+        let c = rand3(&mut rng) * 1.2 - 0.1;
+        let p: Vec<Vec3> = (0..3).map(|_| c + (rand3(&mut rng) - 0.5) * 0.3).collect();
+        mesh.append(&p, &[], &[], &[[0, 1, 2]], 0);
+    }
+    let accel = Accel::build(&mesh);
+    let mut hits = 0;
+    for _ in 0..20_000 {
+        let o = rand3(&mut rng) * 2.0 - 0.5;
+        let d = (rand3(&mut rng) * 2.0 - 1.0).normalize();
+        let ray = Ray::new(o, d);
+        let tmax = if rng.next_f32() < 0.3 { rng.next_f32() } else { f32::INFINITY };
+        let want = brute_force(&mesh, &ray, tmax);
+        let got = accel.intersect(&ray, tmax);
+        match (want, got) {
+            (None, None) => {}
+            (Some((t, prim)), Some(h)) => {
+                hits += 1;
+                // Same triangle test on both sides: t must agree exactly; the prim may differ
+                // only when two triangles are hit at the same t (shared edge or vertex).
+                assert_eq!(t, h.t, "ray {ray:?}");
+                if prim != h.prim {
+                    assert!(brute_force(&mesh_from(mesh.positions.clone(), vec![mesh.triangles[h.prim as usize]]), &ray, tmax).is_some());
+                }
+                assert!(h.bary.x >= 0.0 && h.bary.y >= 0.0 && h.bary.x + h.bary.y <= 1.0 + 1e-6);
+                // The barycentric point must lie on the ray at t.
+                let [p0, p1, p2] = mesh.triangle(h.prim as usize);
+                let p = p0 * (1.0 - h.bary.x - h.bary.y) + p1 * h.bary.x + p2 * h.bary.y;
+                assert!((p - ray.at(h.t)).length() < 1e-4, "{p} vs {}", ray.at(h.t));
+            }
+            (w, g) => panic!("ray {ray:?} tmax {tmax}: brute force {w:?}, accel {g:?}"),
+        }
+        assert_eq!(accel.occluded(&ray, tmax), got.is_some(), "occluded disagrees for {ray:?}");
+    }
+    // Enough hits that the comparison means something.
+    assert!(hits > 2_000, "only {hits} hits");
+}
+
+#[test]
+fn rays_through_shared_edges_and_vertices_never_miss() {
+    let n = 16;
+    let mut rng = Pcg32::new(2, 0);
+    for &(scale, offset) in &[(1.0, Vec3::ZERO), (1e-3, Vec3::new(0.3e-3, -2e-3, 1e-3)), (1e4, Vec3::new(-3e4, 1e4, 5e3))] {
+        let mesh = grid(n, scale, offset);
+        let accel = Accel::build(&mesh);
+        let mut misses = 0;
+        let mut total = 0;
+        // Targets: every interior vertex, every interior edge midpoint (the quad diagonals too),
+        // seen from random eye points above and below the height field.
+        let mut targets = Vec::new();
+        for t in &mesh.triangles {
+            for k in 0..3 {
+                let (a, b) = (mesh.positions[t[k] as usize], mesh.positions[t[(k + 1) % 3] as usize]);
+                targets.push(a);
+                targets.push(a + (b - a) * 0.5);
+                targets.push(a + (b - a) * rng.next_f32());
+            }
+        }
+        for &target in &targets {
+            let rel = (target - offset) / scale;
+            // Skip the outer boundary, where a ray can legitimately graze past.
+            if rel.x < 1e-3 || rel.y < 1e-3 || rel.x > 1.0 - 1e-3 || rel.y > 1.0 - 1e-3 {
+                continue;
+            }
+            for side in [1.0f32, -1.0] {
+                // Slope of these rays ≥ 0.97 / 1.5 > 0.25: every one must cross the surface.
+                let eye = offset + scale * Vec3::new(rng.next_f32() * 2.0 - 0.5, rng.next_f32() * 2.0 - 0.5, side * (1.0 + rng.next_f32()));
+                let ray = Ray::new(eye, (target - eye).normalize());
+                total += 2;
+                if accel.intersect(&ray, f32::INFINITY).is_none() {
+                    misses += 1;
+                }
+                if !accel.occluded(&ray, f32::INFINITY) {
+                    misses += 1;
+                }
+            }
+        }
+        assert!(total > 6000);
+        assert_eq!(misses, 0, "scale {scale}: {misses} of {total} queries let the ray slip through");
+    }
+}
+
+#[test]
+fn degenerate_triangles_are_never_hit() {
+    let nan = f32::NAN;
+    let inf = f32::INFINITY;
+    let positions = vec![
+        // 0-2: collinear
+        Vec3::new(0.0, 0.0, 0.0),
+        Vec3::new(1.0, 1.0, 0.0),
+        Vec3::new(2.0, 2.0, 0.0),
+        // 3: NaN vertex, 4: infinite vertex
+        Vec3::new(nan, 0.0, 0.0),
+        Vec3::new(inf, 1.0, 0.0),
+        // 5-7: a valid triangle far away, so the BVH is not empty
+        Vec3::new(10.0, 0.0, 0.0),
+        Vec3::new(11.0, 0.0, 0.0),
+        Vec3::new(10.0, 1.0, 0.0),
+        // 8: a point off the collinear line
+        Vec3::new(0.0, 2.0, 0.0),
+    ];
+    let triangles = vec![[0, 1, 2], [0, 0, 8], [0, 3, 8], [0, 4, 8], [5, 6, 7], [0, 8, 99]];
+    let mesh = mesh_from(positions, triangles);
+    let accel = Accel::build(&mesh);
+    let mut rng = Pcg32::new(3, 0);
+    for _ in 0..20_000 {
+        // Rays aimed at the degenerate ones' supports (the segment 0-2 and the region around 0-8).
+        let target = Vec3::new(rng.next_f32() * 2.0, rng.next_f32() * 2.0, 0.0);
+        let o = target + Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, 1.0);
+        let ray = Ray::new(o, (target - o).normalize());
+        assert!(accel.intersect(&ray, f32::INFINITY).is_none(), "hit a degenerate triangle with {ray:?}");
+        assert!(!accel.occluded(&ray, f32::INFINITY));
+    }
+    // The valid one still works.
+    let ray = Ray::new(Vec3::new(10.2, 0.2, 1.0), Vec3::NEG_Z);
+    assert_eq!(accel.intersect(&ray, f32::INFINITY).map(|h| h.prim), Some(4));
+    // A mesh of only degenerate triangles builds and hits nothing.
+    let only_bad = mesh_from(vec![Vec3::ZERO, Vec3::X, Vec3::X * 2.0], vec![[0, 1, 2]]);
+    let accel = Accel::build(&only_bad);
+    assert!(accel.intersect(&Ray::new(Vec3::new(0.5, 0.0, 1.0), Vec3::NEG_Z), f32::INFINITY).is_none());
+}
+
+#[test]
+fn tmax_is_an_open_bound() {
+    let mesh = grid(4, 1.0, Vec3::ZERO);
+    let accel = Accel::build(&mesh);
+    let mut rng = Pcg32::new(4, 0);
+    let mut checked = 0;
+    for _ in 0..2000 {
+        let o = Vec3::new(rng.next_f32(), rng.next_f32(), 2.0);
+        let target = Vec3::new(rng.next_f32(), rng.next_f32(), 0.0);
+        let ray = Ray::new(o, (target - o).normalize());
+        let Some(h) = accel.intersect(&ray, f32::INFINITY) else { continue };
+        checked += 1;
+        assert!(accel.intersect(&ray, h.t).is_none(), "hit at exactly tmax");
+        assert!(!accel.occluded(&ray, h.t));
+        let above = h.t * (1.0 + 1e-6);
+        assert_eq!(accel.intersect(&ray, above).map(|x| x.t), Some(h.t));
+        assert!(accel.occluded(&ray, above));
+        assert!(accel.intersect(&ray, 0.0).is_none() && !accel.occluded(&ray, 0.0));
+        assert!(accel.intersect(&ray, -1.0).is_none() && !accel.occluded(&ray, f32::NAN));
+    }
+    assert!(checked > 1500);
+}
+
+#[test]
+fn bad_rays_hit_nothing() {
+    let mesh = grid(4, 1.0, Vec3::ZERO);
+    let accel = Accel::build(&mesh);
+    for (o, d) in [
+        (Vec3::new(0.5, 0.5, 1.0), Vec3::ZERO),
+        (Vec3::new(0.5, 0.5, f32::NAN), Vec3::NEG_Z),
+        (Vec3::new(0.5, 0.5, 1.0), Vec3::new(0.0, f32::INFINITY, -1.0)),
+    ] {
+        assert!(accel.intersect(&Ray::new(o, d), f32::INFINITY).is_none());
+        assert!(!accel.occluded(&Ray::new(o, d), f32::INFINITY));
+    }
+    // An exactly axis-parallel ray still finds the surface.
+    assert!(accel.intersect(&Ray::new(Vec3::new(0.3, 0.6, 1.0), Vec3::NEG_Z), f32::INFINITY).is_some());
+}
+
+/// Rays spawned from points on a triangle (computed by barycentric interpolation, as
+/// `Scene::surface` does) never re-hit it, on either side, at scene scales 1e-3, 1 and 1e4;
+/// and a shadow ray between two facing parallel quads a small gap apart sees neither quad.
+#[test]
+fn offset_origin_avoids_self_hits_and_leaks() {
+    let mut rng = Pcg32::new(5, 0);
+    for &scale in &[1e-3f32, 1.0, 1e4] {
+        // A tilted triangle at a generic position, and one through the origin.
+        for &centre in &[Vec3::new(0.37, -0.61, 0.23), Vec3::ZERO] {
+            let p0 = scale * (centre + Vec3::new(-0.5, -0.3, 0.1));
+            let p1 = scale * (centre + Vec3::new(0.6, -0.2, -0.3));
+            let p2 = scale * (centre + Vec3::new(0.1, 0.7, 0.4));
+            let mesh = mesh_from(vec![p0, p1, p2], vec![[0, 1, 2]]);
+            let accel = Accel::build(&mesh);
+            let ng = mesh.geometric_normal(0);
+            for _ in 0..20_000 {
+                let (mut b1, mut b2) = (rng.next_f32(), rng.next_f32());
+                if b1 + b2 > 1.0 {
+                    (b1, b2) = (1.0 - b1, 1.0 - b2);
+                }
+                let p = p0 * (1.0 - b1 - b2) + p1 * b1 + p2 * b2;
+                let mut d = (rand3(&mut rng) * 2.0 - 1.0).normalize();
+                // Grazing directions are the hard case: make a third of them nearly tangent.
+                if rng.next_f32() < 0.33 {
+                    d = (d - ng * d.dot(ng) * 0.999).normalize();
+                }
+                if d.dot(ng).abs() < 1e-6 {
+                    continue;
+                }
+                let o = offset_ray_origin(p, ng, d);
+                let ray = Ray::new(o, d);
+                assert!(accel.intersect(&ray, f32::INFINITY).is_none(), "scale {scale}: self-hit from {p} dir {d}");
+            }
+        }
+        // Facing quads z = 0 (normal +z) and z = gap (normal -z), gap = 1e-3 of the scene scale.
+        let gap = 1e-3 * scale;
+        let base = Vec3::new(0.2, 0.4, 0.3) * scale;
+        let q = |z: f32| [base + Vec3::new(0.0, 0.0, z), base + Vec3::new(scale, 0.0, z), base + Vec3::new(scale, scale, z), base + Vec3::new(0.0, scale, z)];
+        let (lo, hi) = (q(0.0), q(gap));
+        let mut positions = lo.to_vec();
+        positions.extend_from_slice(&hi);
+        let mesh = mesh_from(positions, vec![[0, 1, 2], [0, 2, 3], [4, 6, 5], [4, 7, 6]]);
+        let accel = Accel::build(&mesh);
+        for _ in 0..5_000 {
+            let a = base + Vec3::new(rng.next_f32() * 0.8 + 0.1, rng.next_f32() * 0.8 + 0.1, 0.0) * scale;
+            let b = base + Vec3::new(rng.next_f32() * 0.8 + 0.1, rng.next_f32() * 0.8 + 0.1, 0.0) * scale + Vec3::Z * gap;
+            let oa = offset_ray_origin(a, Vec3::Z, b - a);
+            let ob = offset_ray_origin(b, Vec3::NEG_Z, oa - b);
+            // Both origins must stay inside the gap (no leaking out of it).
+            assert!(oa.z > a.z && oa.z < b.z && ob.z < b.z && ob.z > a.z, "scale {scale}: offsets leave the gap");
+            let d = ob - oa;
+            let dist = d.length();
+            let ray = Ray::new(oa, d / dist);
+            assert!(!accel.occluded(&ray, dist * (1.0 - 1e-4)), "scale {scale}: falsely occluded");
+            // And the unshortened ray beyond b does hit the upper quad (it is not tunnelled past).
+            let through = Ray::new(oa, (b - oa).normalize());
+            let h = accel.intersect(&through, f32::INFINITY);
+            assert!(h.is_some_and(|h| h.prim >= 2), "scale {scale}: ray towards b missed the upper quad");
+        }
+    }
+}
+

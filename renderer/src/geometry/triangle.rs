@@ -1,0 +1,114 @@
+//! Watertight ray/triangle intersection (Woop, Benthin & Wald 2013, "Watertight Ray/Triangle
+//! Intersection", JCGT 2(1)).
+//!
+//! The ray is sheared so that it runs along +Z through the origin; each edge function is then a
+//! 2D cross product of the sheared vertices. Because a shared edge produces the same edge function
+//! (up to sign) for both triangles that use it, no ray can slip between two triangles sharing an
+//! edge. When an edge function rounds to exactly zero the ray passes (numerically) through the edge
+//! and the three functions are recomputed in f64, which is exact for products of f32 values, so the
+//! tie is broken consistently by both neighbours.
+
+use glam::{Vec3, Vec3A};
+
+/// Per-ray constants of the shear transform, as three row vectors: the sheared coordinates of
+/// a point relative to the origin are its dot products with `mx`, `my`, `mz`. Each row has one
+/// 1 (or `sz`), at most one shear factor and a zero, so every dot product equals the paper's
+/// `a[kx] - sx * a[kz]` exactly (adding a zero product is exact); it is computed in SIMD
+/// without branching on the axis permutation.
+#[derive(Clone, Copy, Debug)]
+pub struct RayShear {
+    pub origin: Vec3A,
+    pub mx: Vec3A,
+    pub my: Vec3A,
+    pub mz: Vec3A,
+}
+
+impl RayShear {
+    /// `None` for a zero or non-finite direction or origin, which can hit nothing.
+    #[inline]
+    pub fn new(origin: Vec3, dir: Vec3) -> Option<RayShear> {
+        if !origin.is_finite() || !dir.is_finite() {
+            return None;
+        }
+        let a = dir.abs();
+        // kz: the dominant axis; kx, ky: the others, swapped for a negative dominant component
+        // so the winding (and thus the sign of the edge functions) is preserved.
+        let kz = if a.x > a.y { if a.x > a.z { 0 } else { 2 } } else if a.y > a.z { 1 } else { 2 };
+        if a[kz] == 0.0 {
+            return None;
+        }
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        if dir[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let sz = 1.0 / dir[kz];
+        let (sx, sy) = (dir[kx] * sz, dir[ky] * sz);
+        let mut mx = Vec3A::ZERO;
+        mx[kx] = 1.0;
+        mx[kz] = -sx;
+        let mut my = Vec3A::ZERO;
+        my[ky] = 1.0;
+        my[kz] = -sy;
+        let mut mz = Vec3A::ZERO;
+        mz[kz] = sz;
+        Some(RayShear { origin: origin.into(), mx, my, mz })
+    }
+}
+
+/// Intersection of the sheared ray with triangle (p0, p1, p2): `(t, b1, b2)` with t in (0, tmax),
+/// where b1, b2 are the weights of p1 and p2.
+#[inline(always)]
+pub fn intersect(r: &RayShear, p0: Vec3A, p1: Vec3A, p2: Vec3A, tmax: f32) -> Option<(f32, f32, f32)> {
+    let a = p0 - r.origin;
+    let b = p1 - r.origin;
+    let c = p2 - r.origin;
+    let ax = a.dot(r.mx);
+    let ay = a.dot(r.my);
+    let bx = b.dot(r.mx);
+    let by = b.dot(r.my);
+    let cx = c.dot(r.mx);
+    let cy = c.dot(r.my);
+
+    let mut u = cx * by - cy * bx;
+    let mut v = ax * cy - ay * cx;
+    let mut w = bx * ay - by * ax;
+    if u == 0.0 || v == 0.0 || w == 0.0 {
+        // Products of two f32 are exact in f64, so the sign of each edge function is exact here
+        // and both triangles sharing the edge see the same (opposite-signed) value.
+        let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
+        u = (cx * by - cy * bx) as f32;
+        v = (ax * cy - ay * cx) as f32;
+        w = (bx * ay - by * ax) as f32;
+    }
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return None;
+    }
+    let det = u + v + w;
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let t_scaled = u * a.dot(r.mz) + v * b.dot(r.mz) + w * c.dot(r.mz);
+    // Compare before dividing (sign-aware) so a back-facing det never flips the range test.
+    let (ts, d) = if det < 0.0 { (-t_scaled, -det) } else { (t_scaled, det) };
+    if !(ts > 0.0) || !(ts < tmax * d) {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let t = t_scaled * inv;
+    if !(t > 0.0 && t < tmax) {
+        return None;
+    }
+    Some((t, v * inv, w * inv))
+}
+
+/// True when the triangle can never be hit: a non-finite vertex or exactly collinear vertices.
+/// The cross product is taken in f64 so tiny but valid triangles (whose f32 cross product would
+/// underflow) are kept.
+pub fn is_degenerate(p0: Vec3, p1: Vec3, p2: Vec3) -> bool {
+    if !(p0.is_finite() && p1.is_finite() && p2.is_finite()) {
+        return true;
+    }
+    let (a, b, c) = (p0.as_dvec3(), p1.as_dvec3(), p2.as_dvec3());
+    (b - a).cross(c - a) == glam::DVec3::ZERO
+}

@@ -1,0 +1,127 @@
+//! Our ray queries against Embree on the shipped meshes and a large procedural mesh: 1M rays in
+//! all, camera rays (a quarter aimed exactly at vertices and edges, quad diagonals included) and
+//! random rays through the bounding box.
+//!
+//! Needs python3 with venv support and network access to PyPI the first time: the venv lives in
+//! `target/embree-venv` and is reused. Without it the test fails (it is required in CI).
+
+use glam::Vec3;
+use renderer::bench::{embree_python, embree_script, embree_trace, trace, RayBatch};
+use renderer::geometry::{Accel, Mesh};
+use std::path::{Path, PathBuf};
+
+fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("renderer/ has a parent").to_path_buf()
+}
+
+fn load_obj(rel: &str) -> Mesh {
+    let path = workspace().join(rel);
+    let (models, _) = tobj::load_obj(&path, &tobj::GPU_LOAD_OPTIONS).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut mesh = Mesh::default();
+    for m in models {
+        let p: Vec<Vec3> = m.mesh.positions.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
+        let t: Vec<[u32; 3]> = m.mesh.indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        mesh.append(&p, &[], &[], &t, 0);
+    }
+    assert!(!mesh.triangles.is_empty(), "{}: no triangles", path.display());
+    mesh
+}
+
+/// A displaced sphere as a latitude/longitude grid of quads split along alternating diagonals:
+/// 2·n·m triangles with many long, thin shared diagonals near the poles.
+fn displaced_sphere(n: u32, m: u32) -> Mesh {
+    let mut positions = Vec::new();
+    for j in 0..=n {
+        let theta = std::f32::consts::PI * j as f32 / n as f32;
+        for i in 0..=m {
+            let phi = std::f32::consts::TAU * i as f32 / m as f32;
+            let r = 1.0 + 0.08 * (5.0 * theta).sin() * (7.0 * phi).cos() + 0.02 * (23.0 * phi + 3.0 * theta).sin();
+            positions.push(Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin()) * r + Vec3::new(0.3, -0.2, 0.1));
+        }
+    }
+    let idx = |i: u32, j: u32| j * (m + 1) + i;
+    let mut tris = Vec::new();
+    for j in 0..n {
+        for i in 0..m {
+            let (a, b, c, d) = (idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1));
+            if (i + j) % 2 == 0 {
+                tris.extend([[a, b, c], [a, c, d]]);
+            } else {
+                tris.extend([[a, b, d], [b, c, d]]);
+            }
+        }
+    }
+    let mut mesh = Mesh::default();
+    mesh.append(&positions, &[], &[], &tris, 0);
+    mesh
+}
+
+#[test]
+fn matches_embree_on_a_million_rays() {
+    let venv = workspace().join("target/embree-venv");
+    let python = embree_python(&venv).unwrap_or_else(|e| {
+        panic!("the Embree cross-check needs python3 -m venv and `pip install embreex numpy` (PyPI) to work: {e}")
+    });
+    let script = embree_script(&workspace());
+    let work = workspace().join("target/embree-crosscheck");
+
+    let sphere = displaced_sphere(230, 230);
+    assert!(sphere.triangles.len() >= 100_000);
+    let meshes = [
+        ("cornell-box-mcguire", load_obj("scenes/assets/cornell-box-mcguire/CornellBox-Original.obj")),
+        ("cornell-box-tinyobj", load_obj("scenes/assets/cornell-box-tinyobj/cornell_box.obj")),
+        ("stanford-bunny", load_obj("scenes/assets/stanford-bunny/bunny.obj")),
+        ("displaced-sphere", sphere),
+    ];
+    // 1M rays: 250k per mesh, half camera rays, half random rays.
+    let per_set = 125_000;
+    let (mut total, mut both_hit, mut hit_miss, mut t_off) = (0usize, 0usize, 0usize, 0usize);
+    for (k, (name, mesh)) in meshes.iter().enumerate() {
+        let accel = Accel::build(mesh);
+        let (lo, hi) = mesh.bounds();
+        let radius = (hi - lo).length();
+        for (set, batch) in [("camera", RayBatch::camera(mesh, per_set, k as u64)), ("random", RayBatch::random_in_bounds(mesh, per_set, k as u64))] {
+            let ours = trace(&accel, &batch, 0);
+            let theirs = embree_trace(&python, &script, &work, mesh, &batch, true).unwrap_or_else(|e| panic!("{name}/{set}: {e}"));
+            let (mut hm, mut to, mut bh) = (0, 0, 0);
+            for (i, (a, b)) in ours.iter().zip(&theirs.hits).enumerate() {
+                match (a, b) {
+                    (Some(a), Some((prim, t))) => {
+                        bh += 1;
+                        // f32 hit distances carry an absolute error of a few ULPs of the scene's
+                        // coordinates, which dominates for rays starting next to a surface.
+                        if (a.t - t).abs() > 1e-4 * a.t.max(*t) + 1e-6 * radius {
+                            to += 1;
+                            if to <= 3 {
+                                eprintln!("{name}/{set} ray {i} {:?}: ours t={} prim {}, Embree t={t} prim {prim}", batch.ray(i), a.t, a.prim);
+                            }
+                        }
+                    }
+                    (None, None) => {}
+                    _ => {
+                        hm += 1;
+                        if hm <= 3 {
+                            eprintln!("{name}/{set} ray {i} {:?}: ours {a:?}, Embree {b:?}", batch.ray(i));
+                        }
+                    }
+                }
+            }
+            println!("{name:<20} {set:<7} {} rays, {bh} hit by both, {hm} hit/miss disagreements, {to} t disagreements", batch.len());
+            assert!(bh > batch.len() / 10, "{name}/{set}: too few hits ({bh}) for a meaningful comparison");
+            total += batch.len();
+            both_hit += bh;
+            hit_miss += hm;
+            t_off += to;
+        }
+    }
+    println!("total {total} rays: {both_hit} hit by both, {hit_miss} hit/miss and {t_off} t disagreements");
+    assert!(total >= 1_000_000);
+    // Both sides are watertight (Embree in robust mode), yet a ray exactly through an edge or
+    // vertex may be decided differently by different (equally valid) tie rules, or hit a
+    // triangle edge-on; 1e-4 of all rays is the budget the issue allows for such cases.
+    assert!(hit_miss as f64 <= 1e-4 * total as f64, "{hit_miss} hit/miss disagreements in {total} rays");
+    // Where both hit, both find the same closest surface; t differs only by rounding (~1e-6
+    // relative). A t disagreement means one of us skipped the nearer triangle: same budget.
+    assert!(t_off as f64 <= 1e-4 * total as f64, "{t_off} t disagreements in {total} rays");
+}
+
