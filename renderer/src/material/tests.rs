@@ -351,6 +351,7 @@ fn chi2_group(group: &str) {
     for (idx, cfg) in chi2_configs(group).iter().enumerate() {
         let t0 = std::time::Instant::now();
         let (p, desc) = chi2_run(cfg, 1000 + idx as u64);
+        // CHI2_VERBOSE=1 with --nocapture prints every configuration's statistic and timing.
         if std::env::var_os("CHI2_VERBOSE").is_some() {
             eprintln!("{desc} [{:.2}s]", t0.elapsed().as_secs_f64());
         }
