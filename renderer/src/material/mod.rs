@@ -12,7 +12,21 @@
 //! flips the frame so that `wo.z > 0` before calling them. Dielectrics see the unflipped frame:
 //! `wo.z > 0` means outside (the side the normal points to), and `eta` is interior/exterior IOR.
 
+use crate::math::is_finite3;
 use glam::{Vec2, Vec3};
+
+mod conductor;
+mod dielectric;
+pub mod fresnel;
+mod lambert;
+pub mod microfacet;
+mod plastic;
+#[cfg(test)]
+mod tests;
+
+use conductor::Conductor;
+use dielectric::Dielectric;
+use plastic::Plastic;
 
 /// What kind of lobe produced a sample; mirrors the renderer bitmask of method.md §1.1.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -58,7 +72,9 @@ pub struct BsdfSample {
     pub pdf: f32,
     pub lobe: Lobe,
     /// Relative IOR crossed by a transmission sample (η_i/η_t), 1 for reflection; for radiance
-    /// scaling and for MIS bookkeeping.
+    /// scaling and for MIS bookkeeping. η_i is the IOR on `wo`'s side (where the path arrives
+    /// from), η_t the one on `wi`'s side: entering glass of IOR 1.5 from air gives 1/1.5. The
+    /// radiance factor (η_i/η_t)² is already included in `weight` and `f_cos`.
     pub eta: f32,
 }
 
@@ -94,8 +110,28 @@ impl Bsdf {
     /// Sample a direction. `u_lobe` picks a lobe, `u` drives the warp. `None` when the sample
     /// carries no energy (e.g. below the hemisphere); never a NaN.
     pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
-        let _ = (wo, u_lobe, u);
-        todo!("material helper")
+        if !is_finite3(wo) || !u_lobe.is_finite() || !crate::math::vec2_finite(u) {
+            return None;
+        }
+        let s = match self.resolved() {
+            Resolved::Lambert(albedo) => lambert::sample(albedo, wo, u),
+            Resolved::Conductor(c) => c.sample(wo, u),
+            Resolved::Dielectric(d) => d.sample(wo, u_lobe, u),
+            Resolved::Plastic(p) => p.sample(wo, u_lobe, u),
+        }?;
+        // Last line of defence: a sample that is not finite, has no density or carries negative
+        // weight would poison the image; dropping it only loses a (measure-zero) bit of energy.
+        let ok = s.pdf > 0.0
+            && s.pdf.is_finite()
+            && is_finite3(s.weight)
+            && is_finite3(s.f_cos)
+            && is_finite3(s.wi)
+            && s.weight.min_element() >= 0.0
+            && s.f_cos.min_element() >= 0.0
+            && s.eta.is_finite()
+            && s.eta > 0.0
+            && s.wi != Vec3::ZERO;
+        ok.then_some(s)
     }
 
     /// f(wo, wi)·|cos θi| of the non-delta lobes.
@@ -105,21 +141,47 @@ impl Bsdf {
 
     /// `eval`, split into the diffuse lobe's part and the rest.
     pub fn eval_split(&self, wo: Vec3, wi: Vec3) -> SplitEval {
-        let _ = (wo, wi);
-        todo!("material helper")
+        if !is_finite3(wo) || !is_finite3(wi) {
+            return SplitEval::default();
+        }
+        let split = match self.resolved() {
+            Resolved::Lambert(albedo) => SplitEval { diffuse: lambert::eval(albedo, wo, wi), other: Vec3::ZERO },
+            Resolved::Conductor(c) => SplitEval { diffuse: Vec3::ZERO, other: c.eval(wo, wi) },
+            Resolved::Dielectric(d) => SplitEval { diffuse: Vec3::ZERO, other: d.eval(wo, wi) },
+            Resolved::Plastic(p) => p.eval_split(wo, wi),
+        };
+        let clean = |v: Vec3| if is_finite3(v) { v.max(Vec3::ZERO) } else { Vec3::ZERO };
+        SplitEval { diffuse: clean(split.diffuse), other: clean(split.other) }
     }
 
     /// Solid-angle density of `sample` producing `wi` through its non-delta lobes.
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        let _ = (wo, wi);
-        todo!("material helper")
+        if !is_finite3(wo) || !is_finite3(wi) {
+            return 0.0;
+        }
+        let p = match self.resolved() {
+            Resolved::Lambert(_) => lambert::pdf(wo, wi),
+            Resolved::Conductor(c) => c.pdf(wo, wi),
+            Resolved::Dielectric(d) => d.pdf(wo, wi),
+            Resolved::Plastic(p) => p.pdf(wo, wi),
+        };
+        if p.is_finite() && p > 0.0 {
+            p
+        } else {
+            0.0
+        }
     }
 
     /// True when every lobe is a delta (no point in next-event estimation).
     pub fn is_delta(&self) -> bool {
         match *self {
             Bsdf::Lambert { .. } | Bsdf::Plastic { .. } => false,
-            Bsdf::Conductor { alpha, .. } | Bsdf::Dielectric { alpha, .. } => alpha < MIN_ALPHA,
+            Bsdf::Conductor { alpha, .. } => !(alpha >= MIN_ALPHA),
+            // An index-matched dielectric is a pass-through (a delta transmission) at any alpha.
+            Bsdf::Dielectric { .. } => match self.resolved() {
+                Resolved::Dielectric(d) => d.pass_through() || !(d.alpha >= MIN_ALPHA),
+                _ => unreachable!(),
+            },
         }
     }
 
@@ -136,7 +198,36 @@ impl Bsdf {
     /// The albedo reported in G-buffers, in [0,1]: diffuse albedo for Lambert and plastic, the
     /// normal-incidence reflectance for conductors, the tint for dielectrics.
     pub fn albedo(&self) -> Vec3 {
-        todo!("material helper")
+        match self.resolved() {
+            Resolved::Lambert(albedo) => albedo,
+            Resolved::Conductor(c) => c.albedo(),
+            Resolved::Dielectric(d) => d.tint.min(Vec3::ONE),
+            Resolved::Plastic(p) => p.albedo(),
+        }
+    }
+
+    /// The parameters with bad values made harmless (the scene loader should already have
+    /// rejected them; this keeps a texture NaN or a stray negative from reaching the maths):
+    /// colours non-finite → 0, albedos clamped to [0, 1], tints ≥ 0, alpha in [0, 1], a
+    /// non-positive or non-finite dielectric IOR becomes 1 (pass-through).
+    fn resolved(&self) -> Resolved {
+        let colour = |v: Vec3| if is_finite3(v) { v.max(Vec3::ZERO) } else { Vec3::ZERO };
+        let alpha = |a: f32| if a.is_finite() { a.clamp(0.0, 1.0) } else { 0.0 };
+        match *self {
+            Bsdf::Lambert { albedo } => Resolved::Lambert(colour(albedo).min(Vec3::ONE)),
+            Bsdf::Conductor { eta, k, alpha: a, specular_tint } => Resolved::Conductor(Conductor {
+                eta: if is_finite3(eta) { eta } else { Vec3::ONE },
+                k: colour(k),
+                alpha: alpha(a),
+                tint: colour(specular_tint),
+            }),
+            Bsdf::Dielectric { eta, alpha: a, tint } => Resolved::Dielectric(Dielectric {
+                eta: if eta.is_finite() && eta > 0.0 { eta } else { 1.0 },
+                alpha: alpha(a),
+                tint: colour(tint),
+            }),
+            Bsdf::Plastic { albedo, eta, alpha } => Resolved::Plastic(Plastic::new(colour(albedo), eta, alpha)),
+        }
     }
 
     /// A representative roughness for path descriptors (GGX alpha; Lambert 1, smooth 0).
@@ -146,6 +237,14 @@ impl Bsdf {
             Bsdf::Conductor { alpha, .. } | Bsdf::Dielectric { alpha, .. } | Bsdf::Plastic { alpha, .. } => alpha,
         }
     }
+}
+
+/// `Bsdf` with sanitised parameters, dispatched to the per-material implementations.
+enum Resolved {
+    Lambert(Vec3),
+    Conductor(Conductor),
+    Dielectric(Dielectric),
+    Plastic(Plastic),
 }
 
 /// Below this GGX alpha a lobe is treated as perfectly smooth (a delta). Rough GGX with alpha
