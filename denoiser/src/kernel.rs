@@ -6,13 +6,13 @@
 //! the margin, so a network trained with valid convolutions filters from the uncropped buffer
 //! and its border pixels are not darkened (the ⚠ note of method.md §3).
 //!
-//! Implementation: `unfold4d` gathers the k² neighbours of every pixel (im2col), then a
-//! broadcast multiply and a sum over the taps. This was the fastest of the variants measured on
-//! flex, and autodiff gets the backward pass from burn's unfold/fold pair.
+//! Implementation: `unfold4d` gathers the k² neighbours of every pixel (im2col, a strided view
+//! when called without padding), then a broadcast multiply and a sum over the taps. This was the
+//! fastest of the variants measured on flex; autodiff differentiates through the view ops.
 
 use burn::tensor::activation::softmax;
 use burn::tensor::module::unfold4d;
-use burn::tensor::ops::UnfoldOptions;
+use burn::tensor::ops::{PadMode, UnfoldOptions};
 use burn::tensor::Tensor;
 
 /// Softmax over the k² tap channels: `[B, k², H, W]` logits → weights in [0,1] summing to 1.
@@ -51,8 +51,14 @@ pub fn apply_weights(input: Tensor<4>, weights: Tensor<4>) -> Tensor<4> {
     let (oy, ox) = ((hi - ho) / 2, (wi - wo) / 2);
     // Keep at most r pixels of real context per side; pad the rest with zeros, symmetrically.
     let (cy, cx) = (oy.min(r), ox.min(r));
-    let x = input.narrow(2, oy - cy, ho + 2 * cy).narrow(3, ox - cx, wo + 2 * cx);
-    let cols = unfold4d(x, [k, k], UnfoldOptions::new([1, 1], [r - cy, r - cx], [1, 1]));
+    let mut x = input.narrow(2, oy - cy, ho + 2 * cy).narrow(3, ox - cx, wo + 2 * cx);
+    if cy < r || cx < r {
+        // Pad explicitly: burn's unfold4d is a zero-copy strided view only without padding;
+        // with padding it falls back to a one-hot convolution costing (C·k²)² MACs per pixel.
+        let (py, px) = (r - cy, r - cx);
+        x = x.pad([(py, py), (px, px)], PadMode::Constant(0.0));
+    }
+    let cols = unfold4d(x, [k, k], UnfoldOptions::new([1, 1], [0, 0], [1, 1]));
     // unfold4d orders its rows channel-major then tap (row-major in the window), so tap index
     // (i+r)·k + (j+r) matches the kernel-map channel order.
     let cols = cols.reshape([b, c, taps, ho * wo]);

@@ -220,6 +220,7 @@ impl ConvStack {
 }
 
 #[cfg(test)]
+#[allow(deprecated)]
 mod tests {
     use super::*;
     use crate::cpu_device;
@@ -231,7 +232,7 @@ mod tests {
             TensorData::new(vec![f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e6, -2.0, 0.0], [6]),
             &d,
         );
-        let y: Vec<f32> = sanitize(x, 100.0).into_data().to_vec().unwrap();
+        let y: Vec<f32> = sanitize(x, 100.0).into_data().to_vec::<f32>().unwrap();
         assert_eq!(y, vec![0.0, 100.0, -100.0, 100.0, -2.0, 0.0]);
     }
 
@@ -247,8 +248,8 @@ mod tests {
             weight_norm: true,
         };
         let c = Conv::new(spec, 1, 2, &d);
-        let v: Vec<f32> = c.weight.val().into_data().to_vec().unwrap();
-        let w: Vec<f32> = c.effective_weight().into_data().to_vec().unwrap();
+        let v: Vec<f32> = c.weight.val().into_data().to_vec::<f32>().unwrap();
+        let w: Vec<f32> = c.effective_weight().into_data().to_vec::<f32>().unwrap();
         for (a, b) in v.iter().zip(&w) {
             // g = ‖v‖ in f32, so g/‖v‖ = 1 up to a few ulps.
             assert!((a - b).abs() <= 1e-6 * a.abs().max(1e-3), "{a} vs {b}");

@@ -43,6 +43,7 @@ pub fn cpu_training_device() -> Device {
 }
 
 #[cfg(test)]
+#[allow(deprecated)]
 pub(crate) mod test_util {
     use burn::tensor::{Device, Gradients, Tensor, TensorData};
 
@@ -52,7 +53,7 @@ pub(crate) mod test_util {
     }
 
     pub fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f64> {
-        let v: Vec<f32> = t.into_data().convert::<f32>().to_vec().unwrap();
+        let v: Vec<f32> = t.into_data().convert::<f32>().to_vec::<f32>().unwrap();
         v.into_iter().map(f64::from).collect()
     }
 

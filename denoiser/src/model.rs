@@ -64,7 +64,9 @@ impl DenoiserConfig {
     }
 
     fn kpcn_for(&self, v: Variant) -> KpcnConfig {
-        self.kpcn.clone().with_in_channels(v.in_channels())
+        let mut c = self.kpcn.clone();
+        c.in_channels = v.in_channels();
+        c
     }
 
     /// Pixels lost per side between the input patch and the output (the KPCN margin).
