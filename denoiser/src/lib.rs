@@ -1,0 +1,67 @@
+//! Pixel-wise guidance Monte Carlo denoiser (Han et al. 2023) on burn 0.22.
+//!
+//! The crate holds the networks, the differentiable ops and the losses; data loading and the
+//! training loop live elsewhere. Facts and their sources: `docs/method.md` §2–§6 (shared docs);
+//! design decisions and measured costs: `docs/denoiser-design.md`.
+//!
+//! Layout convention: every image tensor is NCHW `[batch, channels, height, width]`; per-sample
+//! tensors are `[batch, samples, channels, height, width]`. All transforms are in the branch
+//! domain of method.md §2 (demodulated diffuse, log specular) unless a function says otherwise.
+//!
+//! Modules:
+//! - [`kernel`]: softmax kernel prediction filter (the KPCN reconstruction op).
+//! - [`kpcn`]: KPCN columns (D_G, D_P, G+P baseline) and the diffuse/specular recombination.
+//! - [`pathnet`]: the path-manifold module producing the P-buffer.
+//! - [`ensemble`]: network E and the per-pixel blend of the two denoisers.
+//! - [`model`]: one full branch framework (D_G, D_P, PathNet, E) and the size presets.
+//! - [`loss`]: L1, the path-disentangling loss, validation relMSE.
+//! - [`layers`]: convolution with deterministic init, input sanitising, cropping.
+
+pub mod ensemble;
+pub mod kernel;
+pub mod kpcn;
+pub mod layers;
+pub mod loss;
+pub mod model;
+pub mod pathnet;
+pub mod rng;
+
+pub use burn;
+pub use burn::tensor::{Device, Tensor};
+
+/// ε_a of method.md §2: added to the albedo for demodulation and remodulation.
+pub const ALBEDO_EPS: f32 = 0.00316;
+
+/// The CPU device used by default (burn's pure-Rust flex backend), without gradients.
+pub fn cpu_device() -> Device {
+    Device::flex()
+}
+
+/// The CPU device with autodiff, for training.
+pub fn cpu_training_device() -> Device {
+    Device::flex().autodiff()
+}
+
+#[cfg(test)]
+#[allow(deprecated)]
+pub(crate) mod test_util {
+    use burn::tensor::{Device, Gradients, Tensor, TensorData};
+
+    pub fn tensor<const D: usize>(v: &[f64], dims: [usize; D], device: &Device) -> Tensor<D> {
+        let data: Vec<f32> = v.iter().map(|&x| x as f32).collect();
+        Tensor::from_data(TensorData::new(data, dims), device)
+    }
+
+    pub fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f64> {
+        let v: Vec<f32> = t.into_data().convert::<f32>().to_vec::<f32>().unwrap();
+        v.into_iter().map(f64::from).collect()
+    }
+
+    pub fn grad_of<const D: usize>(t: &Tensor<D>, grads: &Gradients) -> Vec<f64> {
+        to_vec(t.grad(grads).expect("tensor has no gradient"))
+    }
+
+    pub fn max_abs(v: &[f64]) -> f64 {
+        v.iter().fold(0.0, |m, x| m.max(x.abs()))
+    }
+}

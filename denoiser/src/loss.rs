@@ -1,0 +1,125 @@
+//! Losses (method.md §3, §4.3, §7.3). All return a one-element tensor.
+
+use burn::tensor::{Int, Tensor, TensorData};
+
+use crate::layers::center_crop;
+use crate::rng::SplitMix64;
+
+/// Mean absolute error over all elements.
+pub fn l1<const D: usize>(x: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
+    (x - y).abs().mean()
+}
+
+/// Validation relMSE on linear HDR radiance: ½·mean[(x−y)² / (y² + 0.01)].
+pub fn rel_mse_val<const D: usize>(x: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
+    let den = y.clone().square().add_scalar(0.01);
+    ((x - y).square() / den).mean().mul_scalar(0.5)
+}
+
+/// Pseudo-label tone map of the disentangling loss: τ(x) = (max(x,0)/(1+max(x,0)))^(1/2.2).
+pub fn tonemap_label<const D: usize>(t: Tensor<D>) -> Tensor<D> {
+    let t = t.clamp_min(0.0);
+    (t.clone() / t.add_scalar(1.0)).powf_scalar(1.0 / 2.2)
+}
+
+/// One term of the disentangling loss for a fixed pairing: with rows `p` `[.., N, C]` and labels
+/// `r` `[.., N, L]`, d_P = ½‖p_i − p_π(i)‖², d_R = ½‖r_i − r_π(i)‖², result ½·mean (d_P − d_R)².
+/// `perm` (length N) permutes dimension `D − 2`.
+pub fn disentangle_term<const D: usize>(p: Tensor<D>, r: Tensor<D>, perm: &[usize]) -> Tensor<1> {
+    let dev = p.device();
+    let n = perm.len();
+    let idx: Vec<i64> = perm.iter().map(|&i| i as i64).collect();
+    let idx = Tensor::<1, Int>::from_data(TensorData::new(idx, [n]), &dev);
+    let half_sq_dist = |x: Tensor<D>| {
+        let y = x.clone().select(D - 2, idx.clone());
+        (x - y).square().sum_dim(D - 1).mul_scalar(0.5)
+    };
+    let diff = half_sq_dist(p) - half_sq_dist(r);
+    diff.square().mean().mul_scalar(0.5)
+}
+
+/// Path-disentangling ("FMSE") loss, method.md §4.3.
+///
+/// `samples` `[B, S, C, H, W]` are the per-sample P-buffers, `target` `[B, 3, h, w]` the branch
+/// reference (T_diff or T_spec, h ≤ H); the samples are centre-cropped to the target. Labels are
+/// τ(target), shared by all samples of a pixel. Returns the term over one random permutation of
+/// the S·h·w entries of each patch (the same permutation for every patch) plus the term over one
+/// random permutation of all B·S·h·w entries. Fresh permutations come from `rng` each call.
+pub fn path_disentangling_loss(samples: Tensor<5>, target: Tensor<4>, rng: &mut SplitMix64) -> Tensor<1> {
+    let [b, s, c, _, _] = samples.dims();
+    let [bt, l, h, w] = target.dims();
+    assert_eq!(b, bt, "P-buffer batch {b} ≠ target batch {bt}");
+    let n = s * h * w;
+    // Rows = (sample, y, x) within a patch, columns = channels.
+    let p = center_crop(samples, h, w).permute([0, 1, 3, 4, 2]).reshape([b, n, c]);
+    let r = tonemap_label(target).permute([0, 2, 3, 1]).reshape([b, 1, h * w, l]).expand([b, s, h * w, l]).reshape([b, n, l]);
+    let within = disentangle_term(p.clone(), r.clone(), &rng.permutation(n));
+    let across = disentangle_term(p.reshape([1, b * n, c]), r.reshape([1, b * n, l]), &rng.permutation(b * n));
+    within + across
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cpu_device;
+    use crate::test_util::{tensor, to_vec};
+
+    fn scalar(t: Tensor<1>) -> f64 {
+        to_vec(t)[0]
+    }
+
+    #[test]
+    fn l1_and_rel_mse_values() {
+        let d = cpu_device();
+        let x = tensor(&[1.0, 2.0, 0.0, -1.0], [4], &d);
+        let y = tensor(&[0.0, 2.0, 1.0, 1.0], [4], &d);
+        assert!((scalar(l1(x.clone(), y.clone())) - 1.0).abs() < 1e-6);
+        let expect = 0.5 * (1.0 / 0.01 + 0.0 + 1.0 / 1.01 + 4.0 / 1.01) / 4.0;
+        assert!((scalar(rel_mse_val(x, y)) - expect).abs() < 1e-4 * expect);
+    }
+
+    /// Zero exactly when embedding distances equal label distances: P-buffers that carry the
+    /// tone-mapped reference (plus constant channels) for every sample. Scaling them breaks the
+    /// equality and the loss becomes positive, so the test can fail.
+    #[test]
+    fn disentangling_loss_vanishes_on_matching_distances() {
+        let d = cpu_device();
+        let (b, s, h, w, c) = (2, 3, 4, 5, 12);
+        let mut rng = SplitMix64::new(4);
+        let t: Vec<f64> = (0..b * 3 * h * w).map(|_| rng.next_f64() * 4.0).collect();
+        let target = tensor(&t, [b, 3, h, w], &d);
+        let labels = to_vec(tonemap_label(target.clone()));
+        let mut p = vec![0.25; b * s * c * (h + 2) * (w + 2)];
+        for n in 0..b {
+            for si in 0..s {
+                for ch in 0..3 {
+                    for y in 0..h {
+                        for x in 0..w {
+                            p[(((n * s + si) * c + ch) * (h + 2) + y + 1) * (w + 2) + x + 1] = labels[((n * 3 + ch) * h + y) * w + x];
+                        }
+                    }
+                }
+            }
+        }
+        let samples = tensor(&p, [b, s, c, h + 2, w + 2], &d);
+        let zero = scalar(path_disentangling_loss(samples.clone(), target.clone(), &mut rng));
+        // Equal f32 inputs give bit-identical distances; allow a whisker for summation order.
+        assert!(zero.abs() < 1e-10, "loss {zero}");
+        let off = scalar(path_disentangling_loss(samples.mul_scalar(2.0), target, &mut rng));
+        assert!(off > 1e-4, "scaled embedding should be penalised, got {off}");
+    }
+
+    /// Against a hand evaluation for a fixed permutation.
+    #[test]
+    fn disentangle_term_matches_hand_computation() {
+        let d = cpu_device();
+        let p = tensor(&[0.0, 0.0, 1.0, 0.0, 0.0, 2.0], [3, 2], &d);
+        let r = tensor(&[0.0, 0.0, 0.0, 0.5, 0.0, 0.0], [3, 2], &d);
+        // π = (1, 2, 0): d_P = ½·(1, 5, 4), d_R = ½·(0.25, 0.25, 0).
+        let dp = [0.5, 2.5, 2.0];
+        let dr = [0.125, 0.125, 0.0];
+        let expect: f64 = 0.5 * dp.iter().zip(&dr).map(|(a, b)| (a - b) * (a - b)).sum::<f64>() / 3.0;
+        let got = scalar(disentangle_term(p, r, &[1, 2, 0]));
+        assert!((got - expect).abs() < 1e-6, "{got} vs {expect}");
+    }
+}
