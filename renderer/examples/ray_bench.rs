@@ -3,7 +3,7 @@
 //! Also compares obvhs build presets (build time vs rays/s) when PIXGUIDE_BENCH_PRESETS is set.
 
 use glam::Vec3;
-use renderer::bench::{embree_python, embree_script, ray_bench, trace, EmbreeSetup, RayBatch};
+use renderer::bench::{displaced_sphere, embree_python, embree_script, ray_bench, trace, EmbreeSetup, RayBatch};
 use renderer::geometry::{Accel, Mesh};
 use std::path::Path;
 use std::time::Instant;
@@ -19,28 +19,6 @@ fn load_obj(path: &Path) -> Mesh {
     mesh
 }
 
-fn sphere(n: u32, m: u32) -> Mesh {
-    let mut positions = Vec::new();
-    for j in 0..=n {
-        let th = std::f32::consts::PI * j as f32 / n as f32;
-        for i in 0..=m {
-            let ph = std::f32::consts::TAU * i as f32 / m as f32;
-            let r = 1.0 + 0.08 * (5.0 * th).sin() * (7.0 * ph).cos();
-            positions.push(Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin()) * r);
-        }
-    }
-    let idx = |i: u32, j: u32| j * (m + 1) + i;
-    let mut tris = Vec::new();
-    for j in 0..n {
-        for i in 0..m {
-            tris.extend([[idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)], [idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]]);
-        }
-    }
-    let mut mesh = Mesh::default();
-    mesh.append(&positions, &[], &[], &tris, 0);
-    mesh
-}
-
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let threads: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(2);
@@ -51,7 +29,7 @@ fn main() {
     let meshes = [
         ("cornell-box-mcguire", load_obj(&ws.join("scenes/assets/cornell-box-mcguire/CornellBox-Original.obj"))),
         ("stanford-bunny", load_obj(&ws.join("scenes/assets/stanford-bunny/bunny.obj"))),
-        ("sphere-1M", sphere(700, 700)),
+        ("sphere-1M", displaced_sphere(700, 700)),
     ];
     for (name, mesh) in &meshes {
         let cam = RayBatch::camera(mesh, 500_000, 1);

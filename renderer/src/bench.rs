@@ -380,3 +380,28 @@ impl fmt::Display for RayBenchReport {
         Ok(())
     }
 }
+
+/// A displaced UV sphere of 2·n·m triangles with long shared quad diagonals: the benchmark's
+/// large mesh (`displaced_sphere(230, 230)` has 105,800 triangles).
+pub fn displaced_sphere(n: u32, m: u32) -> Mesh {
+    let mut positions = Vec::new();
+    for j in 0..=n {
+        let th = std::f32::consts::PI * j as f32 / n as f32;
+        for i in 0..=m {
+            let ph = std::f32::consts::TAU * i as f32 / m as f32;
+            let r = 1.0 + 0.08 * (5.0 * th).sin() * (7.0 * ph).cos();
+            positions.push(Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin()) * r);
+        }
+    }
+    let idx = |i: u32, j: u32| j * (m + 1) + i;
+    let mut tris = Vec::new();
+    for j in 0..n {
+        for i in 0..m {
+            tris.extend([[idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)], [idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]]);
+        }
+    }
+    let mut mesh = Mesh::default();
+    mesh.append(&positions, &[], &[], &tris, 0);
+    mesh
+}
+

@@ -184,6 +184,10 @@ pub fn trace(scene: &Scene, ray: Ray, rng: &mut Pcg32, max_bounces: u32, russian
         let u_lobe = rng.next_f32();
         let u_bsdf = rng.next_2d();
         let Some(s) = bsdf.sample(wo, u_lobe, u_bsdf) else { break };
+        if s.weight.max_element() <= 0.0 {
+            // A black surface ends the path: nothing further can contribute.
+            break;
+        }
         let wi_world = frame.to_world(s.wi);
         let reflected = wi_world.dot(ng) > 0.0;
         let wo_above = wo_world.dot(ng) > 0.0;
