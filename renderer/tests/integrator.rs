@@ -117,6 +117,7 @@ fn same_seed_same_bytes_on_one_and_two_threads() {
     let dir = std::env::temp_dir().join(format!("pixguide-determinism-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let mut files = Vec::new();
+    let mut frames = Vec::new();
     for threads in [1, 2] {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         let f = pool.install(|| render(&s, 8, 42, 5, BufferRequest::ALL));
@@ -125,7 +126,10 @@ fn same_seed_same_bytes_on_one_and_two_threads() {
         renderer::film::exr_io::write_frame(&f, &exr).unwrap();
         f.descriptors.as_ref().unwrap().write_safetensors(&st).unwrap();
         files.push((std::fs::read(&exr).unwrap(), std::fs::read(&st).unwrap()));
+        frames.push(f);
     }
+    let diff = frames[0].radiance.mean.iter().zip(&frames[1].radiance.mean).filter(|(a, b)| a != b).count();
+    assert_eq!(diff, 0, "radiance differs between 1 and 2 threads in {diff} values");
     assert!(files[0].0 == files[1].0, "EXR differs between 1 and 2 threads");
     assert!(files[0].1 == files[1].1, "descriptors differ between 1 and 2 threads");
     // And a different seed must change the image (the comparison above can fail).

@@ -24,6 +24,7 @@ pub const ALBEDO: Layer = Layer {
 pub const NORMAL: Layer = Layer { mean: &["Ns.X", "Ns.Y", "Ns.Z"], var: &["NsVariance.X", "NsVariance.Y", "NsVariance.Z"] };
 pub const DEPTH: Layer = Layer { mean: &["Depth.Z"], var: &["DepthVariance.Z"] };
 
-/// Header attribute names for frame metadata.
-pub const ATTR_SPP: &str = "pixguide.spp";
-pub const ATTR_DEPTH_SCALE: &str = "pixguide.depthScale";
+/// Frame metadata: one text header attribute `pixguide` holding `spp=<n> depthScale=<x>`.
+pub const ATTR_META: &str = "pixguide";
+pub const ATTR_SPP: &str = "spp";
+pub const ATTR_DEPTH_SCALE: &str = "depthScale";

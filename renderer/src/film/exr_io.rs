@@ -7,6 +7,13 @@ use exr::prelude::*;
 use std::collections::HashMap;
 use std::path::Path;
 
+/// ZIP-compressed scan lines written in increasing order: with the default (unspecified) order
+/// the parallel compressor emits blocks as they finish, so identical images could produce
+/// different files.
+fn deterministic_encoding() -> Encoding {
+    Encoding { compression: Compression::ZIP16, blocks: Blocks::ScanLines, line_order: LineOrder::Increasing }
+}
+
 /// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so a
 /// reader (or an interrupted run) never sees a half-written file.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
@@ -48,10 +55,12 @@ pub fn write_frame(frame: &Frame, path: &Path) -> Result<()> {
         }
     }
     let mut attrs = LayerAttributes::default();
-    attrs.other.insert(Text::from(channels::ATTR_SPP), AttributeValue::I32(frame.spp as i32));
-    attrs.other.insert(Text::from(channels::ATTR_DEPTH_SCALE), AttributeValue::F32(frame.depth_scale));
+    // One attribute only: the exr crate keeps custom attributes in a HashMap, whose order (and
+    // so the file's bytes) would change from run to run with two or more.
+    let meta = format!("{}={} {}={:e}", channels::ATTR_SPP, frame.spp, channels::ATTR_DEPTH_SCALE, frame.depth_scale);
+    attrs.other.insert(Text::from(channels::ATTR_META), AttributeValue::Text(Text::from(meta.as_str())));
     let size = (frame.width as usize, frame.height as usize);
-    let layer = exr::image::Layer::new(size, attrs, Encoding::SMALL_LOSSLESS, AnyChannels::sort(list.into()));
+    let layer = exr::image::Layer::new(size, attrs, deterministic_encoding(), AnyChannels::sort(list.into()));
     let image = Image::from_layer(layer);
     let tmp = tmp_path(path);
     image.write().to_file(&tmp).map_err(|e| Error::image(&tmp, e))?;
@@ -93,15 +102,13 @@ pub fn read_frame(path: &Path) -> Result<Frame> {
         Some(buf)
     };
     let radiance = get(&channels::RADIANCE).ok_or_else(|| Error::image(path, "no R, G, B channels"))?;
-    let attr = |name: &str| layer.attributes.other.get(&Text::from(name));
-    let spp = match attr(channels::ATTR_SPP) {
-        Some(AttributeValue::I32(v)) => *v as u32,
-        _ => 0,
+    let meta = match layer.attributes.other.get(&Text::from(channels::ATTR_META)) {
+        Some(AttributeValue::Text(t)) => t.to_string(),
+        _ => String::new(),
     };
-    let depth_scale = match attr(channels::ATTR_DEPTH_SCALE) {
-        Some(AttributeValue::F32(v)) => *v,
-        _ => 1.0,
-    };
+    let field = |name: &str| meta.split_whitespace().find_map(|kv| kv.strip_prefix(name).and_then(|v| v.strip_prefix('=')).map(str::to_string));
+    let spp = field(channels::ATTR_SPP).and_then(|v| v.parse().ok()).unwrap_or(0);
+    let depth_scale = field(channels::ATTR_DEPTH_SCALE).and_then(|v| v.parse().ok()).unwrap_or(1.0);
     Ok(Frame {
         width: w as u32,
         height: h as u32,
@@ -123,7 +130,7 @@ pub fn write_rgb(path: &Path, tex: &crate::texture::Texture) -> Result<()> {
     let (w, h) = (tex.width as usize, tex.height as usize);
     let ch = |k: usize| FlatSamples::F32(tex.texels.iter().map(|c| c[k]).collect());
     let list = vec![AnyChannel::new("R", ch(0)), AnyChannel::new("G", ch(1)), AnyChannel::new("B", ch(2))];
-    let layer = exr::image::Layer::new((w, h), LayerAttributes::default(), Encoding::SMALL_LOSSLESS, AnyChannels::sort(list.into()));
+    let layer = exr::image::Layer::new((w, h), LayerAttributes::default(), deterministic_encoding(), AnyChannels::sort(list.into()));
     let tmp = tmp_path(path);
     Image::from_layer(layer).write().to_file(&tmp).map_err(|e| Error::image(&tmp, e))?;
     std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
