@@ -55,11 +55,12 @@ impl Descriptors {
         let shape = vec![self.height as usize, self.width as usize, self.spp as usize, FIELDS];
         let view = safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape, &bytes)
             .map_err(|e| Error::image(path, e))?;
+        // One metadata entry only: safetensors keeps metadata in a HashMap, whose iteration
+        // order (and so the file's bytes) would vary between runs with two or more keys.
         let mut meta = HashMap::new();
-        meta.insert("format".to_string(), "pixguide path descriptors v1".to_string());
         meta.insert(
-            "fields".to_string(),
-            "0-2 radiance_no_weight RGB; 3-5 light_intensity RGB; 6-23 throughput 6x RGB vertex-major; 24-29 bounce_type bitmask; 30-35 roughness; 36 path_weight".to_string(),
+            "format".to_string(),
+            "pixguide path descriptors v1; fields: 0-2 radiance_no_weight RGB, 3-5 light_intensity RGB, 6-23 throughput 6x RGB vertex-major, 24-29 bounce_type bitmask, 30-35 roughness, 36 path_weight".to_string(),
         );
         let data = safetensors::serialize([("descriptors", view)], Some(meta)).map_err(|e| Error::image(path, e))?;
         crate::film::exr_io::write_atomically(path, &data)
