@@ -40,6 +40,11 @@ pub struct RenderArgs {
 }
 
 pub fn run(a: RenderArgs) -> Result<()> {
+    for out in [Some(&a.output), a.png.as_ref()].into_iter().flatten() {
+        if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating the output folder {}", dir.display()))?;
+        }
+    }
     let scene = Scene::load(&a.scene)?;
     let request = if a.aovs { BufferRequest::ALL } else { BufferRequest::RADIANCE_ONLY };
     let mut opts = RenderOptions::from_scene(&scene, request);
