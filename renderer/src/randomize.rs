@@ -120,7 +120,9 @@ pub fn randomize(scene: &mut Scene, orig: &Original, name: &str, shot: u32, seed
     let mut rng = Pcg32::new(crate::rng::mix64(seed ^ crate::rng::mix64(shot as u64 + 1)), crate::rng::mix64(name.len() as u64 + seed));
     let (lo, hi) = scene.mesh.bounds();
     let (centre, half) = ((lo + hi) * 0.5, (hi - lo) * 0.5);
-    let inside = (orig.camera.position - centre).abs().cmple(half).all();
+    // Scenes without an environment (closed rooms, Cornell boxes) are lit from inside: treat
+    // them as interiors even when their own camera stands outside the bounds (an open box).
+    let inside = (orig.camera.position - centre).abs().cmple(half).all() || !orig.has_environment;
     let (w, h) = (orig.camera.width, orig.camera.height);
 
     // Camera: the original view is one candidate, so a scene never gets a worse view than its own.
@@ -152,7 +154,7 @@ pub fn randomize(scene: &mut Scene, orig: &Original, name: &str, shot: u32, seed
     // Environment: a fresh procedural sky per shot (scenes without any environment keep none,
     // e.g. closed Cornell boxes, where it would only cost time).
     let rotation = uniform(&mut rng, 0.0, 360.0);
-    let (env, env_name) = if orig.has_environment || !inside {
+    let (env, env_name) = if orig.has_environment {
         let p = SkyParams {
             width: 256,
             height: 128,
