@@ -85,41 +85,34 @@ pub fn bake(p: &SkyParams) -> Texture {
     let theta_s = PI / 2.0 - elev;
     let sun = dir(theta_s, p.sun_azimuth_deg.to_radians());
     let t = p.turbidity.clamp(1.7, 10.0);
+    // Texel index, centre direction and solid angle of every texel of the map.
+    let texel_dirs: Vec<(usize, Vec3, f32)> = (0..h)
+        .flat_map(|j| {
+            let theta = (j as f32 + 0.5) / h as f32 * PI;
+            let d_omega = (2.0 * PI / w as f32) * (PI / h as f32) * theta.sin();
+            (0..w).map(move |i| (j * w + i, dir(theta, (i as f32 + 0.5) / w as f32 * 2.0 * PI), d_omega))
+        })
+        .collect();
     let mut texels = vec![Vec3::ZERO; w * h];
     let mut sky_irradiance = 0.0f64;
-    for j in 0..h {
-        let theta = (j as f32 + 0.5) / h as f32 * PI;
-        let d_omega = (2.0 * PI / w as f32) * (PI / h as f32) * theta.sin();
-        for i in 0..w {
-            let phi = (i as f32 + 0.5) / w as f32 * 2.0 * PI;
-            let d = dir(theta, phi);
-            if d.y > 0.0 {
-                let gamma = d.dot(sun).clamp(-1.0, 1.0).acos();
-                let c = preetham(theta, gamma, theta_s, t);
-                texels[j * w + i] = c;
-                sky_irradiance += (luminance(c) * d.y * d_omega) as f64;
-            }
-        }
+    for &(k, d, d_omega) in texel_dirs.iter().filter(|t| t.1.y > 0.0) {
+        let gamma = d.dot(sun).clamp(-1.0, 1.0).acos();
+        let c = preetham(d.y.clamp(-1.0, 1.0).acos(), gamma, theta_s, t);
+        texels[k] = c;
+        sky_irradiance += (luminance(c) * d.y * d_omega) as f64;
     }
     // Ground: a grey Lambertian plane lit by sky and sun (radiance = albedo·E/π).
     let ground = p.ground_albedo * (sky_irradiance as f32 * (1.0 + p.sun_to_sky.max(0.0)) / PI);
     // Sun disk radiance so that its horizontal irradiance is sun_to_sky × the sky's.
-    let r = p.sun_radius_deg.max(0.05).to_radians();
-    let cos_r = r.cos();
+    let cos_r = p.sun_radius_deg.max(0.05).to_radians().cos();
     let mut sun_texels = Vec::new();
     let mut sun_irr_unit = 0.0f64;
-    for j in 0..h {
-        let theta = (j as f32 + 0.5) / h as f32 * PI;
-        let d_omega = (2.0 * PI / w as f32) * (PI / h as f32) * theta.sin();
-        for i in 0..w {
-            let phi = (i as f32 + 0.5) / w as f32 * 2.0 * PI;
-            let d = dir(theta, phi);
-            if d.y <= 0.0 {
-                texels[j * w + i] = ground;
-            } else if d.dot(sun) >= cos_r {
-                sun_texels.push(j * w + i);
-                sun_irr_unit += (d.y * d_omega) as f64;
-            }
+    for &(k, d, d_omega) in &texel_dirs {
+        if d.y <= 0.0 {
+            texels[k] = ground;
+        } else if d.dot(sun) >= cos_r {
+            sun_texels.push(k);
+            sun_irr_unit += (d.y * d_omega) as f64;
         }
     }
     if sun_irr_unit > 0.0 {
