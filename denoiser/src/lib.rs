@@ -14,6 +14,7 @@
 //! - [`pathnet`]: the path-manifold module producing the P-buffer.
 //! - [`ensemble`]: network E and the per-pixel blend of the two denoisers.
 //! - [`model`]: one full branch framework (D_G, D_P, PathNet, E) and the size presets.
+//! - [`preprocess`]: network inputs from a rendered frame, targets from a reference (§2, §4.1).
 //! - [`loss`]: L1, the path-disentangling loss, validation relMSE.
 //! - [`layers`]: convolution with deterministic init, input sanitising, cropping.
 
@@ -24,6 +25,7 @@ pub mod layers;
 pub mod loss;
 pub mod model;
 pub mod pathnet;
+pub mod preprocess;
 pub mod rng;
 
 pub use burn;
