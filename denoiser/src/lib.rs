@@ -15,6 +15,7 @@
 //! - [`ensemble`]: network E and the per-pixel blend of the two denoisers.
 //! - [`model`]: one full branch framework (D_G, D_P, PathNet, E) and the size presets.
 //! - [`preprocess`]: network inputs from a rendered frame, targets from a reference (§2, §4.1).
+//! - [`method`]: the compared methods (G, P, both, guided) as one model type.
 //! - [`loss`]: L1, the path-disentangling loss, validation relMSE.
 //! - [`layers`]: convolution with deterministic init, input sanitising, cropping.
 
@@ -23,6 +24,7 @@ pub mod kernel;
 pub mod kpcn;
 pub mod layers;
 pub mod loss;
+pub mod method;
 pub mod model;
 pub mod pathnet;
 pub mod preprocess;

@@ -63,7 +63,7 @@ impl DenoiserConfig {
         }
     }
 
-    fn kpcn_for(&self, v: Variant) -> KpcnConfig {
+    pub fn kpcn_for(&self, v: Variant) -> KpcnConfig {
         let mut c = self.kpcn.clone();
         c.in_channels = v.in_channels();
         c

@@ -1,0 +1,220 @@
+//! The compared methods (method.md §5, §6) as one model type, so that training, weight files,
+//! inference and evaluation handle every method the same way.
+//!
+//! [`MethodModel`] holds per branch only the networks its method uses (the others are `None`),
+//! so a weight file contains exactly those tensors, named by module path
+//! (`diffuse.d_g.net.layers.0.weight`, …).
+
+use burn::module::Module;
+use burn::tensor::{Device, Tensor};
+
+use crate::ensemble::{Blend, EnsembleNet};
+use crate::kpcn::channels::G_ALBEDO;
+use crate::kpcn::{recombine, KpcnColumn, Variant};
+use crate::model::DenoiserConfig;
+use crate::pathnet::{PathNet, PathOutput};
+use crate::preprocess::InputTensors;
+use crate::model::BranchInput;
+
+/// Which auxiliary features a model uses and how.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Method {
+    /// KPCN on G-buffers (D_G).
+    G,
+    /// KPCN on P-buffers from the path-manifold module (D_P).
+    P,
+    /// KPCN on G- and P-buffers concatenated (the "both buffers" baseline).
+    Both,
+    /// D_G and D_P blended per pixel by the ensembling network E (the paper's method).
+    Guided,
+}
+
+impl Method {
+    pub const ALL: [Method; 4] = [Method::G, Method::P, Method::Both, Method::Guided];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::G => "g",
+            Method::P => "p",
+            Method::Both => "both",
+            Method::Guided => "guided",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Method> {
+        Method::ALL.into_iter().find(|m| m.name() == s)
+    }
+
+    /// Whether the renderer must record per-sample path descriptors for this model.
+    pub fn needs_descriptors(self) -> bool {
+        self != Method::G
+    }
+}
+
+impl std::fmt::Display for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The networks of one branch (diffuse or specular); unused ones are `None`.
+#[derive(Module, Debug)]
+pub struct BranchNets {
+    pub d_g: Option<KpcnColumn>,
+    pub d_p: Option<KpcnColumn>,
+    pub d_gp: Option<KpcnColumn>,
+    pub path: Option<PathNet>,
+    pub e: Option<EnsembleNet>,
+}
+
+/// What one branch computed, in its transformed domain, at the output size.
+#[derive(Clone, Debug)]
+pub struct BranchResult {
+    /// The branch's final image (I_E for the guided method).
+    pub output: Tensor<4>,
+    pub i_g: Option<Tensor<4>>,
+    pub i_p: Option<Tensor<4>>,
+    /// (W_G, W_P) `[B, 2, h, w]`, guided only.
+    pub weights: Option<Tensor<4>>,
+    pub path: Option<PathOutput>,
+}
+
+/// Both branches and their recombination.
+#[derive(Clone, Debug)]
+pub struct MethodOutput {
+    pub diffuse: BranchResult,
+    pub specular: BranchResult,
+    /// Linear radiance `[B, 3, h, w]`.
+    pub radiance: Tensor<4>,
+}
+
+#[derive(Module, Debug)]
+pub struct MethodModel {
+    pub diffuse: BranchNets,
+    pub specular: BranchNets,
+}
+
+impl BranchNets {
+    fn init(config: &DenoiserConfig, method: Method, branch_seed: u64, device: &Device) -> Self {
+        // Same seeds as `DenoiserConfig::init_branch`, so a guided model starts from the very
+        // D_G / D_P a G or P model of the same seed starts from.
+        let s = config.seed.wrapping_mul(0x9E37_79B9).wrapping_add(branch_seed.wrapping_mul(100));
+        let uses = |m: &[Method]| m.contains(&method);
+        BranchNets {
+            d_g: uses(&[Method::G, Method::Guided]).then(|| config.kpcn_for(Variant::G).init(s + 1, device)),
+            d_p: uses(&[Method::P, Method::Guided]).then(|| config.kpcn_for(Variant::P).init(s + 2, device)),
+            d_gp: uses(&[Method::Both]).then(|| config.kpcn_for(Variant::GP).init(s + 5, device)),
+            path: method.needs_descriptors().then(|| config.pathnet.init(s + 3, device)),
+            e: uses(&[Method::Guided]).then(|| config.ensemble.init(s + 4, device)),
+        }
+    }
+
+    /// The method these networks implement, from which of them are present.
+    pub fn method(&self) -> Option<Method> {
+        match (self.d_g.is_some(), self.d_p.is_some(), self.d_gp.is_some(), self.path.is_some(), self.e.is_some()) {
+            (true, false, false, false, false) => Some(Method::G),
+            (false, true, false, true, false) => Some(Method::P),
+            (false, false, true, true, false) => Some(Method::Both),
+            (true, true, false, true, true) => Some(Method::Guided),
+            _ => None,
+        }
+    }
+
+    pub fn forward(&self, input: BranchInput, path_weight: Tensor<4>) -> BranchResult {
+        let path = self.path.as_ref().map(|p| p.forward(input.descriptors.clone()));
+        let pbuf = path.as_ref().map(|p| p.pixel_buffer());
+        let i_g = self.d_g.as_ref().map(|d| d.forward(Tensor::cat(vec![input.colour.clone(), input.g_block.clone()], 1)));
+        let i_p = self.d_p.as_ref().map(|d| d.forward(Tensor::cat(vec![input.colour.clone(), pbuf.clone().expect("D_P needs a PathNet")], 1)));
+        if let Some(d) = &self.d_gp {
+            let x = Tensor::cat(vec![input.colour, input.g_block, path_weight, pbuf.expect("G+P needs a PathNet")], 1);
+            return BranchResult { output: d.forward(x), i_g: None, i_p: None, weights: None, path };
+        }
+        match (&self.e, i_g, i_p) {
+            (Some(e), Some(g), Some(p)) => {
+                let Blend { output, weights } = e.forward(g.clone(), p.clone(), input.g_block, pbuf.unwrap());
+                BranchResult { output, i_g: Some(g), i_p: Some(p), weights: Some(weights), path }
+            }
+            (None, Some(g), None) => BranchResult { output: g.clone(), i_g: Some(g), i_p: None, weights: None, path },
+            (None, None, Some(p)) => BranchResult { output: p.clone(), i_g: None, i_p: Some(p), weights: None, path },
+            _ => panic!("inconsistent branch networks (method {:?})", self.method()),
+        }
+    }
+}
+
+impl MethodModel {
+    /// Fresh weights for `method` (deterministic in `config.seed`).
+    pub fn init(config: &DenoiserConfig, method: Method, device: &Device) -> Self {
+        MethodModel { diffuse: BranchNets::init(config, method, 1, device), specular: BranchNets::init(config, method, 2, device) }
+    }
+
+    pub fn method(&self) -> Option<Method> {
+        let m = self.diffuse.method();
+        (m == self.specular.method()).then_some(m).flatten()
+    }
+
+    /// Runs both branches and recombines D̂ ⊙ (A + ε_a) + exp(P̂) − 1 (method.md §3, §6.1).
+    pub fn forward(&self, input: InputTensors) -> MethodOutput {
+        let albedo = input.diffuse.g_block.clone().narrow(1, G_ALBEDO, 3);
+        let diffuse = self.diffuse.forward(input.diffuse, input.path_weight.clone());
+        let specular = self.specular.forward(input.specular, input.path_weight);
+        let radiance = recombine(diffuse.output.clone(), specular.output.clone(), albedo);
+        MethodOutput { diffuse, specular, radiance }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ensemble::EnsembleConfig;
+    use crate::kpcn::KpcnConfig;
+    use crate::pathnet::PathNetConfig;
+    use crate::test_util::to_vec;
+
+    fn tiny() -> DenoiserConfig {
+        DenoiserConfig::new(
+            KpcnConfig::new(34).with_depth(2).with_width(8).with_conv_kernel(3).with_filter_size(3),
+            PathNetConfig::new().with_embed_width(8).with_unet_widths(vec![8, 8]).with_convs_per_block(1).with_out_hidden(8),
+            EnsembleConfig::new().with_depth(2).with_width(6).with_conv_kernel(3),
+        )
+    }
+
+    fn inputs(b: usize, s: usize, h: usize, w: usize, d: &Device) -> InputTensors {
+        let r = |dims: [usize; 4], k: f32| Tensor::<4>::ones(dims, d).mul_scalar(k);
+        let desc = Tensor::<5>::ones([b, s, 36, h, w], d).mul_scalar(0.3);
+        let g_block = r([b, 24, h, w], 0.5);
+        InputTensors {
+            diffuse: BranchInput { colour: r([b, 10, h, w], 0.7), g_block: g_block.clone(), descriptors: desc.clone() },
+            specular: BranchInput { colour: r([b, 10, h, w], 0.2), g_block, descriptors: desc },
+            path_weight: r([b, 1, h, w], -0.1),
+        }
+    }
+
+    /// Every method builds the networks it needs and nothing else, runs, and gives finite
+    /// radiance at the documented output size.
+    #[test]
+    fn every_method_runs_with_only_its_networks() {
+        let d = crate::cpu_device();
+        let c = tiny();
+        for m in Method::ALL {
+            let model = MethodModel::init(&c, m, &d);
+            assert_eq!(model.method(), Some(m));
+            assert_eq!(model.diffuse.e.is_some(), m == Method::Guided);
+            let out = model.forward(inputs(2, 3, 10, 9, &d));
+            let o = 2 * c.margin();
+            assert_eq!(out.radiance.dims(), [2, 3, 10 - o, 9 - o], "{m}");
+            assert_eq!(out.diffuse.weights.is_some(), m == Method::Guided);
+            assert!(to_vec(out.radiance).iter().all(|x| x.is_finite()), "{m}");
+            assert_eq!(Method::parse(m.name()), Some(m));
+        }
+    }
+
+    /// A guided model starts from the same D_G a G model of the same seed starts from.
+    #[test]
+    fn guided_shares_initial_columns_with_g() {
+        let d = crate::cpu_device();
+        let g = MethodModel::init(&tiny(), Method::G, &d);
+        let guided = MethodModel::init(&tiny(), Method::Guided, &d);
+        let w = |m: &MethodModel| to_vec(m.specular.d_g.as_ref().unwrap().net.layers[0].weight.val());
+        assert_eq!(w(&g), w(&guided));
+    }
+}
