@@ -6,6 +6,8 @@
 
 use crate::camera::Camera;
 use crate::light::{Environment, Lights};
+use crate::math::luminance;
+use crate::texture::Texture;
 use crate::math::Ray;
 use crate::rng::Pcg32;
 use crate::scene::{ColorParam, Material, MaterialKind, Scene};
@@ -42,6 +44,41 @@ impl Original {
         let has_environment = scene.lights.env_radiance(Vec3::Y).max_element() > 0.0
             || scene.lights.env_radiance(Vec3::X).max_element() > 0.0;
         Original { camera: scene.camera.clone(), fov_deg, materials: scene.materials.clone(), has_environment }
+    }
+}
+
+/// Irradiance (luminance) on an upward-facing horizontal plane from the upper hemisphere of a
+/// lat-long map in `light::environment`'s convention (row j at θ = (j + ½)/h·π from +Y).
+pub fn horizontal_irradiance(map: &Texture) -> f32 {
+    let (w, h) = (map.width as usize, map.height as usize);
+    let mut e = 0.0f64;
+    for j in 0..h {
+        let theta = (j as f64 + 0.5) / h as f64 * std::f64::consts::PI;
+        if theta >= std::f64::consts::FRAC_PI_2 {
+            break;
+        }
+        let d_omega = (std::f64::consts::TAU / w as f64) * (std::f64::consts::PI / h as f64) * theta.sin();
+        let row: f64 = map.texels[j * w..(j + 1) * w].iter().map(|&c| luminance(c) as f64).sum();
+        e += row * theta.cos() * d_omega;
+    }
+    e as f32
+}
+
+/// Radiance a white Lambertian plane facing up should get from a randomised sky: the sky map is
+/// scaled so that E_h/π lands in this range (log-uniform). With albedos drawn in [0.01, 1]
+/// (mean ≈ 0.5) a sunlit floor then sits at 0.2–0.7 and sun-facing walls (which can receive
+/// several times E_h when the sun is low) rarely clip, while the old fixed scale of 0.5–2 on a
+/// sky whose zenith luminance is 1 gave E_h/π ≈ 2–20 and blew out most outdoor shots.
+pub const SKY_WHITE_RADIANCE: (f32, f32) = (0.45, 1.1);
+
+/// The environment scale that gives a white horizontal plane radiance `white` under `map`
+/// (1 for a map with no light from above, where no scale can help).
+pub fn sky_scale_for(map: &Texture, white: f32) -> f32 {
+    let e = horizontal_irradiance(map);
+    if e > 1e-9 && e.is_finite() {
+        white * crate::math::PI / e
+    } else {
+        1.0
     }
 }
 
@@ -164,9 +201,12 @@ pub fn randomize(scene: &mut Scene, orig: &Original, name: &str, shot: u32, seed
             sun_to_sky: uniform(&mut rng, 1.0, 8.0),
             ..Default::default()
         };
-        let scale = uniform(&mut rng, 0.5, 2.0);
+        let image = bake(&p);
+        let (lo, hi) = SKY_WHITE_RADIANCE;
+        let white = lo * (hi / lo).powf(rng.next_f32());
+        let scale = sky_scale_for(&image, white);
         let name = format!("sky elev {:.1} az {:.1} turbidity {:.2} sun/sky {:.2} scale {:.2}", p.sun_elevation_deg, p.sun_azimuth_deg, p.turbidity, p.sun_to_sky, scale);
-        (Environment::Map { image: bake(&p), rotation_deg: rotation, scale }, name)
+        (Environment::Map { image, rotation_deg: rotation, scale }, name)
     } else {
         (Environment::Constant(Vec3::ZERO), "none".to_string())
     };
@@ -183,5 +223,37 @@ pub fn randomize(scene: &mut Scene, orig: &Original, name: &str, shot: u32, seed
         environment: env_name,
         environment_rotation_deg: rotation,
         materials,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn horizontal_irradiance_of_a_constant_sky_is_pi_l() {
+        // A constant radiance L over the upper hemisphere gives E = πL; the midpoint rule over
+        // 64 rows of θ is accurate to well under 0.1 %.
+        let map = Texture { width: 32, height: 64, texels: vec![Vec3::splat(2.0); 32 * 64] };
+        let e = horizontal_irradiance(&map);
+        assert!((e - 2.0 * crate::math::PI).abs() < 1e-3 * e, "{e}");
+        // Light from below the horizon does not count.
+        let mut lower = map.clone();
+        lower.texels[..32 * 32].fill(Vec3::ZERO);
+        assert!(horizontal_irradiance(&lower) < 1e-6);
+        assert_eq!(sky_scale_for(&lower, 0.8), 1.0);
+    }
+
+    #[test]
+    fn scaled_skies_land_in_the_exposure_range() {
+        // Whatever the sun's height and strength, the scale brings E_h/π of the scaled map to
+        // the requested white radiance (exactly, up to float rounding).
+        for (elev, ratio) in [(5.0, 1.0), (30.0, 4.0), (80.0, 8.0)] {
+            let p = SkyParams { width: 128, height: 64, sun_elevation_deg: elev, sun_to_sky: ratio, ..Default::default() };
+            let map = bake(&p);
+            let s = sky_scale_for(&map, 0.7);
+            let white = s * horizontal_irradiance(&map) / crate::math::PI;
+            assert!((white - 0.7).abs() < 1e-3, "elev {elev}: {white}");
+        }
     }
 }

@@ -16,6 +16,7 @@ pub mod gltf_format;
 pub mod image_io;
 pub mod obj;
 pub mod primitives;
+pub mod procedural;
 pub mod toml_format;
 
 pub use builder::{MAX_RESOLUTION_PIXELS, MAX_RESOLUTION_SIDE};

@@ -32,7 +32,7 @@
 
 use super::builder::{check_resolution, warn, Builder};
 use super::obj::MaterialChoice;
-use super::{gltf_format, image_io, obj, primitives};
+use super::{gltf_format, image_io, obj, primitives, procedural};
 use super::{ColorParam, Material, MaterialKind, RenderSettings, SceneDescription};
 use crate::camera::Camera;
 use crate::light::Environment;
@@ -138,6 +138,9 @@ pub enum ShapeType {
     Cube,
     Sphere,
     Disk,
+    Lathe,
+    Heightfield,
+    Grid,
 }
 
 #[derive(Deserialize, Debug)]
@@ -156,6 +159,19 @@ pub struct ShapeDef {
     pub scale: Option<Scale>,
     /// Row-major 4×4 matrix (rows as written), applied before scale, rotate and translate.
     pub matrix: Option<[[f32; 4]; 4]>,
+    /// Procedural shapes (`procedural.rs`): lathe.
+    pub profile: Option<Vec<[f32; 2]>>,
+    /// heightfield
+    pub resolution: Option<[u32; 2]>,
+    pub amplitude: Option<f32>,
+    pub frequency: Option<f32>,
+    pub octaves: Option<u32>,
+    pub seed: Option<u32>,
+    /// grid
+    pub element: Option<String>,
+    pub count: Option<[u32; 3]>,
+    pub spacing: Option<[f32; 3]>,
+    pub element_scale: Option<Scale>,
 }
 
 /// Euler angles in degrees `[x, y, z]` (applied about X, then Y, then Z, fixed axes), or an
@@ -326,14 +342,13 @@ fn build(path: &Path, file: SceneFile) -> Result<SceneDescription> {
                 return Err(check.err(&f("materials_override"), "only obj and gltf shapes have file materials"));
             }
         }
-        if !matches!(s.kind, ShapeType::Sphere | ShapeType::Disk) {
-            if s.radius.is_some() {
-                return Err(check.err(&f("radius"), "only spheres and disks have a radius"));
-            }
-            if s.segments.is_some() {
-                return Err(check.err(&f("segments"), "only spheres and disks have segments"));
-            }
+        if !matches!(s.kind, ShapeType::Sphere | ShapeType::Disk) && s.radius.is_some() {
+            return Err(check.err(&f("radius"), "only spheres and disks have a radius"));
         }
+        if !matches!(s.kind, ShapeType::Sphere | ShapeType::Disk | ShapeType::Lathe | ShapeType::Grid) && s.segments.is_some() {
+            return Err(check.err(&f("segments"), "only spheres, disks, lathes and grids have segments"));
+        }
+        procedural_keys_belong(&check, i, s)?;
         let radius = match s.radius {
             Some(r) => check.positive(&f("radius"), r)?,
             None => 1.0,
@@ -372,7 +387,8 @@ fn build(path: &Path, file: SceneFile) -> Result<SceneDescription> {
                 ShapeType::Quad => primitives::quad(),
                 ShapeType::Cube => primitives::cube(),
                 ShapeType::Sphere => primitives::sphere(radius, segments),
-                _ => primitives::disk(radius, segments),
+                ShapeType::Disk => primitives::disk(radius, segments),
+                _ => procedural_mesh(&check, i, s, segments)?,
             };
             b.add_mesh(&mesh.transformed(&transform), material, &format!("shapes[{i}]"))?;
         }
@@ -502,6 +518,66 @@ fn material(check: &Check, b: &mut Builder, dir: &Path, name: &str, d: &Material
         return Err(check.err(&f("strength"), "emission × strength overflows"));
     }
     Ok(Material { name: name.to_string(), kind, emission, two_sided_emission: d.two_sided_emission.unwrap_or(false) })
+}
+
+/// Rejects a procedural key on a shape type that does not read it (a typo must not pass silently).
+fn procedural_keys_belong(check: &Check, i: usize, s: &ShapeDef) -> Result<()> {
+    use ShapeType::*;
+    let keys: [(&str, bool, ShapeType); 10] = [
+        ("profile", s.profile.is_some(), Lathe),
+        ("resolution", s.resolution.is_some(), Heightfield),
+        ("amplitude", s.amplitude.is_some(), Heightfield),
+        ("frequency", s.frequency.is_some(), Heightfield),
+        ("octaves", s.octaves.is_some(), Heightfield),
+        ("seed", s.seed.is_some(), Heightfield),
+        ("element", s.element.is_some(), Grid),
+        ("count", s.count.is_some(), Grid),
+        ("spacing", s.spacing.is_some(), Grid),
+        ("element_scale", s.element_scale.is_some(), Grid),
+    ];
+    for (key, present, owner) in keys {
+        if present && s.kind != owner {
+            return Err(check.err(&format!("shapes[{i}].{key}"), format!("only {} shapes have it", format!("{owner:?}").to_lowercase())));
+        }
+    }
+    Ok(())
+}
+
+/// The mesh of a lathe, heightfield or grid shape (docs/scene-format.md, "Procedural shapes").
+fn procedural_mesh(check: &Check, i: usize, s: &ShapeDef, segments: u32) -> Result<primitives::TriMesh> {
+    let f = |key: &str| format!("shapes[{i}].{key}");
+    let mesh = match s.kind {
+        ShapeType::Lathe => {
+            let profile = s.profile.as_ref().ok_or_else(|| check.err(&f("profile"), "missing (a lathe needs [[r, y], ...] points)"))?;
+            procedural::lathe(profile, segments).map_err(|m| check.err(&f("profile"), m))?
+        }
+        ShapeType::Heightfield => {
+            let p = procedural::HeightfieldParams {
+                resolution: s.resolution.unwrap_or([64, 64]),
+                amplitude: s.amplitude.unwrap_or(0.1),
+                frequency: s.frequency.unwrap_or(4.0),
+                octaves: s.octaves.unwrap_or(4),
+                seed: s.seed.unwrap_or(0),
+            };
+            procedural::heightfield(&p).map_err(|m| check.err(&format!("shapes[{i}]"), m))?
+        }
+        _ => {
+            let element = match s.element.as_deref().unwrap_or("cube") {
+                "cube" => procedural::GridElement::Cube,
+                "sphere" => procedural::GridElement::Sphere,
+                other => return Err(check.err(&f("element"), format!("unknown element '{other}' (expected \"cube\" or \"sphere\")"))),
+            };
+            let count = s.count.ok_or_else(|| check.err(&f("count"), "missing (a grid needs [nx, ny, nz])"))?;
+            let spacing = check.vec3(&f("spacing"), s.spacing.unwrap_or([2.5, 2.5, 2.5]))?;
+            let element_scale = match &s.element_scale {
+                None => Vec3::ONE,
+                Some(Scale::Uniform(u)) => Vec3::splat(*u),
+                Some(Scale::Xyz(v)) => Vec3::from(*v),
+            };
+            procedural::grid(element, count, spacing, element_scale, segments).map_err(|m| check.err(&format!("shapes[{i}]"), m))?
+        }
+    };
+    Ok(mesh)
 }
 
 /// T · R · S · M of a shape (M = `matrix`, applied first).
