@@ -30,6 +30,8 @@ enum Command {
     Dataset(cli::dataset::DatasetArgs),
     /// Render the test scenes' high-spp references (resumable).
     Reference(cli::reference::ReferenceArgs),
+    /// Train a denoiser (g, p, both, guided, ablations) on a dataset folder (resumable).
+    Train(cli::train::TrainArgs),
 }
 
 fn main() {
@@ -45,6 +47,7 @@ fn main() {
         Command::Sky(a) => cli::sky::run(a),
         Command::Dataset(a) => cli::dataset::run(a),
         Command::Reference(a) => cli::reference::run(a),
+        Command::Train(a) => cli::train::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -29,6 +29,7 @@ pub mod model;
 pub mod pathnet;
 pub mod preprocess;
 pub mod rng;
+pub mod train;
 
 pub use burn;
 pub use burn::tensor::{Device, Tensor};
