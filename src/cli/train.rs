@@ -94,6 +94,9 @@ pub struct TrainArgs {
     /// Wall-clock budget of this run in minutes (split over the stages by their steps).
     #[arg(long)]
     pub minutes: Option<f64>,
+    /// End this session after N steps with a checkpoint (continue later with --resume).
+    #[arg(long)]
+    pub stop_after: Option<usize>,
     /// Use at most this many training shots.
     #[arg(long)]
     pub max_train_shots: Option<usize>,
@@ -166,6 +169,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
         patience: a.patience,
         checkpoint_every: a.checkpoint_every,
         minutes: a.minutes,
+        pause_after: a.stop_after,
         metadata: metadata.clone(),
     };
 
@@ -266,6 +270,10 @@ pub fn run(a: TrainArgs) -> Result<()> {
     };
     let outcome = tr::run(&data, &opts, model, Some(&ckpt), a.resume, &mut on_event)?;
     pb.finish_and_clear();
+    if outcome.paused {
+        println!("stopped after {} steps as asked; checkpoint in {} (continue with --resume)", outcome.total_steps, ckpt.display());
+        return Ok(());
+    }
     if let Some(e) = log_err {
         eprintln!("warning: could not write {}: {e}", log_path.display());
     }

@@ -69,6 +69,9 @@ pub struct TrainOptions {
     /// Wall-clock budget of the whole run; each stage gets its share in proportion to its
     /// steps and ends early (gracefully, with a checkpoint) when over it.
     pub minutes: Option<f64>,
+    /// End this session after this many steps (with a checkpoint), as if interrupted; a later
+    /// `resume` continues. Not part of the run's identity.
+    pub pause_after: Option<usize>,
     /// Extra metadata written into weight files (provenance).
     pub metadata: BTreeMap<String, String>,
 }
@@ -105,6 +108,8 @@ pub struct Outcome {
     pub best_val: Option<f64>,
     pub total_steps: usize,
     pub seconds: f64,
+    /// The session ended at `pause_after`; resume to finish.
+    pub paused: bool,
 }
 
 /// The fresh or pretrained model a run starts from. Guided models (except Full-N-Full) take
@@ -322,6 +327,7 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
     let elapsed = |started: &Instant| session_elapsed + started.elapsed().as_secs_f64();
 
     let mut best_model: Option<MethodModel> = None;
+    let mut session_steps = 0usize;
     while st.stage < opts.stages.len() {
         let k = st.stage;
         let stage = &opts.stages[k];
@@ -336,6 +342,14 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
                 reason = "time budget";
                 break;
             }
+            if opts.pause_after.is_some_and(|p| session_steps >= p) {
+                if let Some(c) = &ckpt {
+                    st.elapsed = elapsed(&started);
+                    save_checkpoint(c, &model, &optim, &mut st, &opts.metadata)?;
+                }
+                return Ok(Outcome { model, best_val: st.best_val, total_steps: st.total_steps, seconds: elapsed(&started), paused: true });
+            }
+            session_steps += 1;
             let t0 = Instant::now();
             let (refs, mut rng) = draw_batch(data, opts, k, st.step);
             let (input, target) = batch_tensors(&data.train, &refs, &data.spps, opts.patch, margin, with_desc, &crate::cpu_training_device());
@@ -402,7 +416,7 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
             events(Event::Checkpoint { path: &c.dir });
         }
     }
-    Ok(Outcome { model, best_val: st.best_val, total_steps: st.total_steps, seconds: elapsed(&started) })
+    Ok(Outcome { model, best_val: st.best_val, total_steps: st.total_steps, seconds: elapsed(&started), paused: false })
 }
 
 fn save_checkpoint(c: &CheckpointPaths, model: &MethodModel, optim: &ModuleOptimizer, st: &mut RunState, meta: &BTreeMap<String, String>) -> Result<(), TrainError> {
