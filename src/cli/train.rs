@@ -173,6 +173,8 @@ pub fn run(a: TrainArgs) -> Result<()> {
         metadata: metadata.clone(),
     };
 
+    let device = denoiser::cpu_training_device();
+    let model = tr::initial_model(&opts, a.from_g.as_deref(), a.from_p.as_deref(), &device)?;
     let t_load = Instant::now();
     let heap0 = alloc_stats::current();
     let load = LoadOptions { spps: a.spp.clone(), descriptors: method.needs_descriptors(), patch: a.patch, sampling, max_train: a.max_train_shots };
@@ -199,8 +201,6 @@ pub fn run(a: TrainArgs) -> Result<()> {
         (alloc_stats::current().saturating_sub(heap0)) as f64 / (1 << 20) as f64
     );
 
-    let device = denoiser::cpu_training_device();
-    let model = tr::initial_model(&opts, a.from_g.as_deref(), a.from_p.as_deref(), &device)?;
     let ckpt = a.checkpoint_dir.clone().unwrap_or_else(|| tr::default_checkpoint_dir(&a.output));
     if let Some(dir) = a.output.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
