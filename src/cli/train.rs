@@ -40,8 +40,16 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Output weights (safetensors). A log `<output>.log.jsonl` is written next to it.
-    #[arg(short, long)]
-    pub output: PathBuf,
+    #[arg(short, long, required_unless_present = "all")]
+    pub output: Option<PathBuf>,
+    /// Train the whole comparison in sequence into --out-dir: g, p, both, guided, fix-n-train,
+    /// radiance-only, full-n-full, then g/p/guided at the half preset. Finished models are
+    /// skipped, so rerunning continues; --minutes is then the budget of the whole plan.
+    #[arg(long, conflicts_with_all = ["output", "method", "ablation", "from_g", "from_p", "preset"])]
+    pub all: bool,
+    /// Folder of the --all weights (`<variant>-<preset>.safetensors`).
+    #[arg(long, default_value = "denoiser/weights")]
+    pub out_dir: PathBuf,
     /// Checkpoint folder (default `<output>.ckpt`).
     #[arg(long)]
     pub checkpoint_dir: Option<PathBuf>,
@@ -128,7 +136,78 @@ fn schedule_options(a: &TrainArgs) -> ScheduleOptions {
     o
 }
 
+/// One run of the --all plan: variant name, method, ablation, preset, relative cost per step
+/// (measured on this machine: see docs/training.md) and its stages' steps.
+struct PlanItem {
+    name: &'static str,
+    method: &'static str,
+    ablation: Option<&'static str>,
+    preset: &'static str,
+    cost: f64,
+}
+
+const PLAN: [PlanItem; 10] = [
+    PlanItem { name: "g", method: "g", ablation: None, preset: "default", cost: 1.0 },
+    PlanItem { name: "p", method: "p", ablation: None, preset: "default", cost: 3.0 },
+    PlanItem { name: "both", method: "both", ablation: None, preset: "default", cost: 3.0 },
+    PlanItem { name: "guided", method: "guided", ablation: None, preset: "default", cost: 4.0 },
+    PlanItem { name: "fix-n-train", method: "guided", ablation: Some("fix-n-train"), preset: "default", cost: 2.5 },
+    PlanItem { name: "radiance-only", method: "guided", ablation: Some("radiance-only"), preset: "default", cost: 4.0 },
+    PlanItem { name: "full-n-full", method: "guided", ablation: Some("full-n-full"), preset: "default", cost: 4.0 },
+    PlanItem { name: "g", method: "g", ablation: None, preset: "half", cost: 1.5 },
+    PlanItem { name: "p", method: "p", ablation: None, preset: "half", cost: 3.5 },
+    PlanItem { name: "guided", method: "guided", ablation: None, preset: "half", cost: 5.0 },
+];
+
+fn run_all(a: TrainArgs) -> Result<()> {
+    let so = schedule_options(&a);
+    let steps = |it: &PlanItem| -> usize {
+        let m = Method::parse(it.method).unwrap();
+        let ab = it.ablation.and_then(Ablation::parse);
+        schedule::plan(m, ab, &so).iter().map(|s| s.steps).sum()
+    };
+    let weight: Vec<f64> = PLAN.iter().map(|it| it.cost * steps(it) as f64).collect();
+    let total_w: f64 = weight.iter().sum();
+    let path = |name: &str, preset: &str| a.out_dir.join(format!("{name}-{preset}.safetensors"));
+    let start = Instant::now();
+    for (k, it) in PLAN.iter().enumerate() {
+        let out = path(it.name, it.preset);
+        if out.exists() {
+            println!("[{}/{}] {} exists, skipped", k + 1, PLAN.len(), out.display());
+            continue;
+        }
+        let mut r = a.clone();
+        r.all = false;
+        r.output = Some(out);
+        r.method = it.method.to_string();
+        r.ablation = it.ablation.map(str::to_string);
+        r.preset = it.preset.to_string();
+        r.checkpoint_dir = None;
+        r.resume = true;
+        if Method::parse(it.method) == Some(Method::Guided) && it.ablation != Some("full-n-full") {
+            r.from_g = Some(path("g", it.preset));
+            r.from_p = Some(path("p", it.preset));
+        }
+        // Each run's share of the whole budget, in proportion to its expected cost; whatever
+        // earlier runs left unused goes to the later ones.
+        if let Some(total) = a.minutes {
+            let left = total - start.elapsed().as_secs_f64() / 60.0;
+            let share: f64 = weight[k] / weight[k..].iter().sum::<f64>();
+            r.minutes = Some((left * share).max(0.5));
+        }
+        println!("[{}/{}] {} ({}){}", k + 1, PLAN.len(), it.name, it.preset, r.minutes.map(|m| format!(", budget {m:.1} min")).unwrap_or_default());
+        run(r)?;
+    }
+    let _ = total_w;
+    println!("plan done in {:.1} min", start.elapsed().as_secs_f64() / 60.0);
+    Ok(())
+}
+
 pub fn run(a: TrainArgs) -> Result<()> {
+    if a.all {
+        return run_all(a);
+    }
+    let output = a.output.clone().context("--output is required")?;
     let mut method = Method::parse(&a.method).with_context(|| format!("--method {}: expected g, p, both or guided", a.method))?;
     let ablation = match &a.ablation {
         None => None,
@@ -201,12 +280,12 @@ pub fn run(a: TrainArgs) -> Result<()> {
         (alloc_stats::current().saturating_sub(heap0)) as f64 / (1 << 20) as f64
     );
 
-    let ckpt = a.checkpoint_dir.clone().unwrap_or_else(|| tr::default_checkpoint_dir(&a.output));
-    if let Some(dir) = a.output.parent().filter(|d| !d.as_os_str().is_empty()) {
+    let ckpt = a.checkpoint_dir.clone().unwrap_or_else(|| tr::default_checkpoint_dir(&output));
+    if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let log_path = {
-        let mut s = a.output.as_os_str().to_owned();
+        let mut s = output.as_os_str().to_owned();
         s.push(".log.jsonl");
         PathBuf::from(s)
     };
@@ -282,7 +361,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
     metadata.insert("wall_seconds".to_string(), format!("{:.1}", outcome.seconds));
     metadata.insert("val_rel_mse".to_string(), outcome.best_val.map(|v| format!("{v:.6}")).unwrap_or_else(|| "none".into()));
     metadata.insert("stages".to_string(), serde_json::to_string(&opts.stages)?);
-    denoiser::train::checkpoint::save_weights(&a.output, &outcome.model, &metadata)?;
+    denoiser::train::checkpoint::save_weights(&output, &outcome.model, &metadata)?;
     let per_stage: Vec<String> = opts
         .stages
         .iter()
@@ -298,7 +377,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
         per_stage.join(", "),
         outcome.best_val.map(|v| format!("{v:.5}")).unwrap_or_else(|| "n/a (no val shots)".into()),
         peak as f64 / (1 << 20) as f64,
-        a.output.display(),
+        output.display(),
         log_path.display()
     );
     Ok(())
