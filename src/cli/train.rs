@@ -47,6 +47,9 @@ pub struct TrainArgs {
     /// skipped, so rerunning continues; --minutes is then the budget of the whole plan.
     #[arg(long, conflicts_with_all = ["output", "method", "ablation", "from_g", "from_p", "preset"])]
     pub all: bool,
+    /// Multiply every step count of the --all plan (e.g. 0.01 for a smoke test).
+    #[arg(long, default_value_t = 1.0)]
+    pub all_scale: f64,
     /// Folder of the --all weights (`<variant>-<preset>.safetensors`).
     #[arg(long, default_value = "denoiser/weights")]
     pub out_dir: PathBuf,
@@ -136,38 +139,41 @@ fn schedule_options(a: &TrainArgs) -> ScheduleOptions {
     o
 }
 
-/// One run of the --all plan: variant name, method, ablation, preset, relative cost per step
-/// (measured on this machine: see docs/training.md) and its stages' steps.
+/// One run of the --all plan: variant, method, ablation, preset, its stage lengths
+/// (branch, finetune, joint-or-scratch steps) and the estimated seconds per step on this
+/// machine without other load (docs/training.md), which sets its share of a --minutes budget.
 struct PlanItem {
     name: &'static str,
     method: &'static str,
     ablation: Option<&'static str>,
     preset: &'static str,
-    cost: f64,
+    steps: [usize; 3],
+    secs_per_step: f64,
 }
 
+const fn item(name: &'static str, method: &'static str, ablation: Option<&'static str>, preset: &'static str, steps: [usize; 3], secs_per_step: f64) -> PlanItem {
+    PlanItem { name, method, ablation, preset, steps, secs_per_step }
+}
+
+/// Proposed for ≤ 2.5 h on this 2-core machine (docs/training.md).
 const PLAN: [PlanItem; 10] = [
-    PlanItem { name: "g", method: "g", ablation: None, preset: "default", cost: 1.0 },
-    PlanItem { name: "p", method: "p", ablation: None, preset: "default", cost: 3.0 },
-    PlanItem { name: "both", method: "both", ablation: None, preset: "default", cost: 3.0 },
-    PlanItem { name: "guided", method: "guided", ablation: None, preset: "default", cost: 4.0 },
-    PlanItem { name: "fix-n-train", method: "guided", ablation: Some("fix-n-train"), preset: "default", cost: 2.5 },
-    PlanItem { name: "radiance-only", method: "guided", ablation: Some("radiance-only"), preset: "default", cost: 4.0 },
-    PlanItem { name: "full-n-full", method: "guided", ablation: Some("full-n-full"), preset: "default", cost: 4.0 },
-    PlanItem { name: "g", method: "g", ablation: None, preset: "half", cost: 1.5 },
-    PlanItem { name: "p", method: "p", ablation: None, preset: "half", cost: 3.5 },
-    PlanItem { name: "guided", method: "guided", ablation: None, preset: "half", cost: 5.0 },
+    item("g", "g", None, "default", [1500, 200, 0], 0.52),
+    item("p", "p", None, "default", [800, 100, 0], 1.6),
+    item("both", "both", None, "default", [800, 100, 0], 1.6),
+    item("guided", "guided", None, "default", [0, 0, 400], 2.43),
+    item("fix-n-train", "guided", Some("fix-n-train"), "default", [0, 0, 500], 0.56),
+    item("radiance-only", "guided", Some("radiance-only"), "default", [0, 0, 400], 2.15),
+    item("full-n-full", "guided", Some("full-n-full"), "default", [0, 0, 400], 2.43),
+    item("g", "g", None, "half", [400, 50, 0], 0.74),
+    item("p", "p", None, "half", [300, 50, 0], 2.3),
+    item("guided", "guided", None, "half", [0, 0, 150], 3.2),
 ];
 
 fn run_all(a: TrainArgs) -> Result<()> {
-    let so = schedule_options(&a);
-    let steps = |it: &PlanItem| -> usize {
-        let m = Method::parse(it.method).unwrap();
-        let ab = it.ablation.and_then(Ablation::parse);
-        schedule::plan(m, ab, &so).iter().map(|s| s.steps).sum()
-    };
-    let weight: Vec<f64> = PLAN.iter().map(|it| it.cost * steps(it) as f64).collect();
-    let total_w: f64 = weight.iter().sum();
+    let scaled = |n: usize| if n == 0 { 0 } else { ((n as f64 * a.all_scale).round() as usize).max(1) };
+    let steps = |it: &PlanItem| -> usize { it.steps.iter().map(|&n| scaled(n)).sum() };
+    let weight: Vec<f64> = PLAN.iter().map(|it| it.secs_per_step * steps(it) as f64).collect();
+    println!("plan: {} runs, {:.0} steps, estimated {:.0} min without other load", PLAN.len(), PLAN.iter().map(|it| steps(it) as f64).sum::<f64>(), weight.iter().sum::<f64>() / 60.0);
     let path = |name: &str, preset: &str| a.out_dir.join(format!("{name}-{preset}.safetensors"));
     let start = Instant::now();
     for (k, it) in PLAN.iter().enumerate() {
@@ -183,6 +189,11 @@ fn run_all(a: TrainArgs) -> Result<()> {
         r.ablation = it.ablation.map(str::to_string);
         r.preset = it.preset.to_string();
         r.checkpoint_dir = None;
+        let [b, f, j] = it.steps.map(scaled);
+        r.branch_steps = Some(b);
+        r.finetune_steps = Some(f);
+        r.joint_steps = Some(j);
+        r.scratch_steps = Some(j);
         r.resume = true;
         if Method::parse(it.method) == Some(Method::Guided) && it.ablation != Some("full-n-full") {
             r.from_g = Some(path("g", it.preset));
@@ -198,7 +209,6 @@ fn run_all(a: TrainArgs) -> Result<()> {
         println!("[{}/{}] {} ({}){}", k + 1, PLAN.len(), it.name, it.preset, r.minutes.map(|m| format!(", budget {m:.1} min")).unwrap_or_default());
         run(r)?;
     }
-    let _ = total_w;
     println!("plan done in {:.1} min", start.elapsed().as_secs_f64() / 60.0);
     Ok(())
 }

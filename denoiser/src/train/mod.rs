@@ -331,6 +331,10 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
     while st.stage < opts.stages.len() {
         let k = st.stage;
         let stage = &opts.stages[k];
+        if stage.steps == 0 {
+            st.stage += 1;
+            continue;
+        }
         model = configure(model, stage);
         let e_params = e_ids(&model);
         events(Event::StageStart { index: k, stage, from_step: st.step, steps_per_epoch: epoch });
@@ -402,7 +406,8 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
                 model = checkpoint::load_weights(&c.best(k), model, None)?.0;
             }
         }
-        let last = k + 1 == opts.stages.len();
+        // A stage of zero steps (e.g. --finetune-steps 0) keeps the previous stage's best.
+        let last = opts.stages[k + 1..].iter().all(|s| s.steps == 0);
         if !last {
             st.best_val = None;
             st.best_step = None;
