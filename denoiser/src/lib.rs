@@ -17,6 +17,7 @@
 //! - [`preprocess`]: network inputs from a rendered frame, targets from a reference (§2, §4.1).
 //! - [`method`]: the compared methods (G, P, both, guided) as one model type.
 //! - [`loss`]: L1, the path-disentangling loss, validation relMSE.
+//! - [`weights`]: weight files (safetensors, module-path names, config + provenance metadata).
 //! - [`layers`]: convolution with deterministic init, input sanitising, cropping.
 
 pub mod ensemble;
@@ -29,6 +30,7 @@ pub mod model;
 pub mod pathnet;
 pub mod preprocess;
 pub mod rng;
+pub mod weights;
 
 pub use burn;
 pub use burn::tensor::{Device, Tensor};
