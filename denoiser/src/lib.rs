@@ -17,10 +17,12 @@
 //! - [`preprocess`]: network inputs from a rendered frame, targets from a reference (§2, §4.1).
 //! - [`method`]: the compared methods (G, P, both, guided) as one model type.
 //! - [`loss`]: L1, the path-disentangling loss, validation relMSE.
+//! - [`infer`]: tiled whole-image inference with bounded memory.
 //! - [`weights`]: weight files (safetensors, module-path names, config + provenance metadata).
 //! - [`layers`]: convolution with deterministic init, input sanitising, cropping.
 
 pub mod ensemble;
+pub mod infer;
 pub mod kernel;
 pub mod kpcn;
 pub mod layers;
