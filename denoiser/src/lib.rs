@@ -18,6 +18,7 @@
 //! - [`method`]: the compared methods (G, P, both, guided) as one model type.
 //! - [`loss`]: L1, the path-disentangling loss, validation relMSE.
 //! - [`infer`]: tiled whole-image inference with bounded memory.
+//! - [`metrics`]: relMSE, 1 − SSIM, relMSE_val (method.md §7.3).
 //! - [`weights`]: weight files (safetensors, module-path names, config + provenance metadata).
 //! - [`layers`]: convolution with deterministic init, input sanitising, cropping.
 
@@ -28,6 +29,7 @@ pub mod kpcn;
 pub mod layers;
 pub mod loss;
 pub mod method;
+pub mod metrics;
 pub mod model;
 pub mod pathnet;
 pub mod preprocess;
