@@ -5,3 +5,4 @@ pub mod bench;
 pub mod sky;
 pub mod dataset;
 pub mod reference;
+pub mod denoise;
