@@ -32,6 +32,8 @@ enum Command {
     Reference(cli::reference::ReferenceArgs),
     /// Train a denoiser (g, p, both, guided, ablations) on a dataset folder (resumable).
     Train(cli::train::TrainArgs),
+    /// Denoise a frame written by `render --aovs` (G, P, both-buffers or guided model).
+    Denoise(cli::denoise::DenoiseArgs),
 }
 
 fn main() {
@@ -48,6 +50,7 @@ fn main() {
         Command::Dataset(a) => cli::dataset::run(a),
         Command::Reference(a) => cli::reference::run(a),
         Command::Train(a) => cli::train::run(a),
+        Command::Denoise(a) => cli::denoise::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

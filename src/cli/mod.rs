@@ -6,3 +6,4 @@ pub mod sky;
 pub mod dataset;
 pub mod reference;
 pub mod train;
+pub mod denoise;
