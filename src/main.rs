@@ -30,6 +30,10 @@ enum Command {
     Dataset(cli::dataset::DatasetArgs),
     /// Render the test scenes' high-spp references (resumable).
     Reference(cli::reference::ReferenceArgs),
+    /// Train a denoiser (g, p, both, guided, ablations) on a dataset folder (resumable).
+    Train(cli::train::TrainArgs),
+    /// Denoise a frame written by `render --aovs` (G, P, both-buffers or guided model).
+    Denoise(cli::denoise::DenoiseArgs),
 }
 
 fn main() {
@@ -45,6 +49,8 @@ fn main() {
         Command::Sky(a) => cli::sky::run(a),
         Command::Dataset(a) => cli::dataset::run(a),
         Command::Reference(a) => cli::reference::run(a),
+        Command::Train(a) => cli::train::run(a),
+        Command::Denoise(a) => cli::denoise::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -17,18 +17,26 @@
 //! - [`preprocess`]: network inputs from a rendered frame, targets from a reference (§2, §4.1).
 //! - [`method`]: the compared methods (G, P, both, guided) as one model type.
 //! - [`loss`]: L1, the path-disentangling loss, validation relMSE.
+//! - [`infer`]: tiled whole-image inference with bounded memory.
+//! - [`metrics`]: relMSE, 1 − SSIM, relMSE_val (method.md §7.3).
+//! - [`weights`]: weight files (safetensors, module-path names, config + provenance metadata).
+//! - [`train`]: data, patch sampling, the staged schedule, checkpoints (docs/training.md).
 //! - [`layers`]: convolution with deterministic init, input sanitising, cropping.
 
 pub mod ensemble;
+pub mod infer;
 pub mod kernel;
 pub mod kpcn;
 pub mod layers;
 pub mod loss;
 pub mod method;
+pub mod metrics;
 pub mod model;
 pub mod pathnet;
 pub mod preprocess;
 pub mod rng;
+pub mod train;
+pub mod weights;
 
 pub use burn;
 pub use burn::tensor::{Device, Tensor};

@@ -5,3 +5,5 @@ pub mod bench;
 pub mod sky;
 pub mod dataset;
 pub mod reference;
+pub mod train;
+pub mod denoise;

@@ -1,11 +1,13 @@
 //! `pixguide render`.
 
+use super::denoise::{self as dn, InferArgs};
 use super::progress;
 use anyhow::{Context, Result};
 use clap::Args;
 use renderer::film::{self, BufferRequest, Frame};
 use renderer::integrator::{self, RenderOptions};
 use renderer::scene::Scene;
+use denoiser::method::Method;
 use std::path::{Path, PathBuf};
 
 #[derive(Args)]
@@ -34,19 +36,61 @@ pub struct RenderArgs {
     /// descriptors in `<output>.descriptors.safetensors`, a PNG of each buffer and a contact sheet.
     #[arg(long)]
     pub aovs: bool,
+    /// Denoise in the same process: guided (the paper's method), g, p, both, or none. `-o` and
+    /// `--png` then get the denoised image. Records only the buffers the model needs (per-sample
+    /// descriptors only for p, both and guided).
+    #[arg(long, default_value = "none", value_parser = parse_denoise)]
+    pub denoise: DenoiseModel,
+    /// Weight file for --denoise (default: denoiser/weights/<model>-default.safetensors).
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+    /// With --denoise: also write the noisy frame here.
+    #[arg(long)]
+    pub noisy: Option<PathBuf>,
+    /// Reference EXR: print relMSE and 1 − SSIM (method.md §7.3) of the noisy and the denoised image.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+    /// With --denoise guided: write W_G (the G-buffer denoiser's share per pixel) as a
+    /// colour-mapped PNG, diffuse branch left, specular right.
+    #[arg(long)]
+    pub weights_png: Option<PathBuf>,
+    #[command(flatten)]
+    pub infer: InferArgs,
     /// Don't show the progress bar.
     #[arg(short, long)]
     pub quiet: bool,
 }
 
+/// `--denoise` value: a model, or none. (A newtype because clap reads `Option<T>` fields as
+/// "flag may be absent", not as a value that can be "none".)
+#[derive(Clone, Copy, Debug)]
+pub struct DenoiseModel(pub Option<Method>);
+
+fn parse_denoise(s: &str) -> std::result::Result<DenoiseModel, String> {
+    if s == "none" {
+        Ok(DenoiseModel(None))
+    } else {
+        dn::parse_method(s).map(|m| DenoiseModel(Some(m)))
+    }
+}
+
 pub fn run(a: RenderArgs) -> Result<()> {
-    for out in [Some(&a.output), a.png.as_ref()].into_iter().flatten() {
+    if a.weights_png.is_some() && a.denoise.0 != Some(Method::Guided) {
+        anyhow::bail!("--weights-png needs --denoise guided (only the guided model blends two denoisers)");
+    }
+    // Weights before the render, so that a missing file costs nothing.
+    let loaded = a.denoise.0.map(|m| dn::load_weights(m, a.weights.as_deref())).transpose()?;
+    for out in [Some(&a.output), a.png.as_ref(), a.noisy.as_ref()].into_iter().flatten() {
         if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).with_context(|| format!("creating the output folder {}", dir.display()))?;
         }
     }
     let scene = Scene::load(&a.scene)?;
-    let request = if a.aovs { BufferRequest::ALL } else { BufferRequest::RADIANCE_ONLY };
+    let request = match (a.aovs, a.denoise.0) {
+        (true, _) => BufferRequest::ALL,
+        (false, Some(m)) => BufferRequest { split: true, gbuffers: true, descriptors: m.needs_descriptors() },
+        (false, None) => BufferRequest::RADIANCE_ONLY,
+    };
     let mut opts = RenderOptions::from_scene(&scene, request);
     opts.spp = a.spp.unwrap_or(opts.spp);
     opts.seed = a.seed.unwrap_or(opts.seed);
@@ -57,20 +101,44 @@ pub fn run(a: RenderArgs) -> Result<()> {
     if a.quiet {
         pb.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
-    let (frame, stats) = integrator::render(&scene, &opts, &|n| pb.set_position(n))?;
+    let t_render = std::time::Instant::now();
+    let (mut frame, stats) = integrator::render(&scene, &opts, &|n| pb.set_position(n))?;
+    let render_s = t_render.elapsed().as_secs_f64();
     pb.finish_and_clear();
     if frame.nonfinite_samples > 0 {
         eprintln!("warning: {} samples had non-finite radiance and were dropped", frame.nonfinite_samples);
     }
 
-    film::exr_io::write_frame(&frame, &a.output)?;
-    if let Some(png) = &a.png {
-        film::png::write_radiance(png, frame.width, frame.height, &frame.radiance.mean, a.exposure)?;
-    }
     if a.aovs {
         write_aovs(&frame, &a.output, a.exposure)?;
     }
     println!("{}: {}x{} at {} spp: {}", a.scene.display(), frame.width, frame.height, frame.spp, stats.summary());
+    println!("render: {render_s:.2} s");
+    let Some(loaded) = loaded else {
+        film::exr_io::write_frame(&frame, &a.output)?;
+        if let Some(png) = &a.png {
+            film::png::write_radiance(png, frame.width, frame.height, &frame.radiance.mean, a.exposure)?;
+        }
+        if let Some(r) = &a.reference {
+            let reference = dn::read_reference(r, frame.width, frame.height)?;
+            println!("{}", dn::error_line("noisy", &frame.radiance.mean, &reference));
+        }
+        return Ok(());
+    };
+    if let Some(noisy) = &a.noisy {
+        film::exr_io::write_frame(&frame, noisy)?;
+    }
+    let run = dn::denoise_frame(&mut frame, &loaded, &a.infer.options())?;
+    dn::print_denoise_summary(&loaded, &run);
+    dn::write_outputs(&run.denoised, frame.spp, &a.output, None, a.weights_png.as_deref())?;
+    if let Some(png) = &a.png {
+        film::png::write_radiance(png, frame.width, frame.height, &run.denoised.radiance, a.exposure)?;
+    }
+    if let Some(r) = &a.reference {
+        let reference = dn::read_reference(r, frame.width, frame.height)?;
+        println!("{}", dn::error_line("noisy", &frame.radiance.mean, &reference));
+        println!("{}", dn::error_line("denoised", &run.denoised.radiance, &reference));
+    }
     Ok(())
 }
 

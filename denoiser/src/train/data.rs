@@ -1,0 +1,232 @@
+//! Loading the shots of a `pixguide dataset` folder into memory, prepared once per shot and
+//! sample count, and cutting batches from them.
+
+use std::path::{Path, PathBuf};
+
+use burn::tensor::Device;
+use renderer::film::descriptors::{field, FIELDS};
+use renderer::film::{exr_io, Descriptors};
+
+use super::patches::{self, PatchSampler, Sampling};
+use super::TrainError;
+use crate::preprocess::{prepare, prepare_target, InputTensors, PreparedImage, PreparedTarget, TargetTensors, DESCRIPTOR_CHANNELS};
+
+/// One shot: its inputs at every sample count, its target and its patch sampler.
+pub struct Shot {
+    /// `<split>/<scene>_<shot>` as in shots.jsonl.
+    pub name: String,
+    /// Inputs per entry of [`Dataset::spps`], without descriptors (those are shared below).
+    pub images: Vec<PreparedImage>,
+    /// Normalised descriptors of the largest sample count `[S_max, 36, H, W]`; a render at
+    /// fewer samples uses the first S of them (the dataset's lower counts are prefixes).
+    pub descriptors: Option<Vec<f32>>,
+    pub target: PreparedTarget,
+    pub sampler: PatchSampler,
+}
+
+pub struct Dataset {
+    pub root: PathBuf,
+    pub spps: Vec<usize>,
+    pub train: Vec<Shot>,
+    pub val: Vec<Shot>,
+    pub width: usize,
+    pub height: usize,
+}
+
+/// What to load.
+#[derive(Clone, Debug)]
+pub struct LoadOptions {
+    /// Sample counts to use (each needs a noisy_<S>spp.exr); empty = all found in the first shot.
+    pub spps: Vec<usize>,
+    pub descriptors: bool,
+    pub patch: usize,
+    pub sampling: Sampling,
+    /// At most this many training shots (None = all), for quick runs.
+    pub max_train: Option<usize>,
+}
+
+fn err(path: &Path, msg: impl std::fmt::Display) -> TrainError {
+    TrainError::Data(format!("{}: {msg}", path.display()))
+}
+
+fn spps_in(dir: &Path) -> Vec<usize> {
+    let mut v: Vec<usize> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|e| {
+            let n = e.file_name().to_string_lossy().into_owned();
+            n.strip_prefix("noisy_")?.strip_suffix("spp.exr")?.parse().ok()
+        })
+        .collect();
+    v.sort_unstable();
+    v
+}
+
+/// Reads shots.jsonl: (split, dir) per line.
+pub fn read_index(root: &Path) -> Result<Vec<(String, String)>, TrainError> {
+    let path = root.join("shots.jsonl");
+    let text = std::fs::read_to_string(&path).map_err(|e| err(&path, format!("{e} (is this a `pixguide dataset` folder?)")))?;
+    let mut out = Vec::new();
+    for (k, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+        let v: serde_json::Value = serde_json::from_str(line).map_err(|e| err(&path, format!("line {}: {e}", k + 1)))?;
+        let s = |f: &str| v.get(f).and_then(|x| x.as_str()).map(str::to_owned).ok_or_else(|| err(&path, format!("line {}: field `{f}` missing", k + 1)));
+        out.push((s("split")?, s("dir")?));
+    }
+    Ok(out)
+}
+
+/// Loads one shot folder.
+pub fn load_shot(root: &Path, dir: &str, spps: &[usize], opts: &LoadOptions) -> Result<Shot, TrainError> {
+    let d = root.join(dir);
+    let max = *spps.iter().max().unwrap();
+    let ref_path = d.join("reference.exr");
+    let reference = exr_io::read_frame(&ref_path).map_err(|e| err(&ref_path, e))?;
+    let target = prepare_target(&reference).map_err(|e| err(&ref_path, e))?;
+    let desc_path = d.join(format!("descriptors_{max}spp.safetensors"));
+    // The descriptors feed the P-buffer models, the G+P path-weight channel and the importance
+    // map's bounce-type term, so they are read whenever present.
+    let desc = if desc_path.exists() {
+        Some(Descriptors::read_safetensors(&desc_path).map_err(|e| err(&desc_path, e))?)
+    } else if opts.descriptors {
+        return Err(err(&desc_path, "missing; P-buffer models need the per-sample descriptors"));
+    } else {
+        None
+    };
+    let mut images = Vec::with_capacity(spps.len());
+    let mut descriptors = None;
+    for &s in spps {
+        let p = d.join(format!("noisy_{s}spp.exr"));
+        let mut frame = exr_io::read_frame(&p).map_err(|e| err(&p, e))?;
+        if frame.width as usize != target.width || frame.height as usize != target.height {
+            return Err(err(&p, format!("{}×{} but the reference is {}×{}", frame.width, frame.height, target.width, target.height)));
+        }
+        frame.descriptors = desc.clone();
+        let mut img = prepare(&frame).map_err(|e| err(&p, e))?;
+        if s == max && opts.descriptors {
+            descriptors = img.descriptors.take();
+        }
+        img.descriptors = None;
+        images.push(img);
+    }
+    let (w, h) = (target.width, target.height);
+    if w < opts.patch || h < opts.patch {
+        return Err(err(&d, format!("{w}×{h} is smaller than the {}² patch", opts.patch)));
+    }
+    let sampler = match opts.sampling {
+        Sampling::Uniform => PatchSampler::uniform(w, h, opts.patch),
+        Sampling::Importance => {
+            let n = w * h;
+            let normal = reference.normal.as_ref().map(|b| b.mean.clone()).unwrap_or_else(|| vec![0.0; 3 * n]);
+            let bounce0: Vec<[f32; 3]> = match &desc {
+                Some(ds) => (0..n)
+                    .map(|i| {
+                        let mut f = [0.0f32; 3];
+                        let k = ds.spp as usize;
+                        for s in 0..k {
+                            let b = ds.data[(i * k + s) * FIELDS + field::BOUNCE_TYPE].max(0.0) as u32;
+                            for (j, flag) in [patches::DIFFUSE, patches::GLOSSY, patches::SPECULAR].into_iter().enumerate() {
+                                if b & flag != 0 {
+                                    f[j] += 1.0 / k as f32;
+                                }
+                            }
+                        }
+                        f
+                    })
+                    .collect(),
+                None => vec![[0.0; 3]; n],
+            };
+            let m = patches::importance_map(&reference.radiance.mean, &normal, &bounce0, w, h, patches::sigma_for(w, h));
+            PatchSampler::from_map(&m, w, h, opts.patch)
+        }
+    };
+    Ok(Shot { name: dir.to_string(), images, descriptors, target, sampler })
+}
+
+impl Dataset {
+    pub fn load(root: &Path, opts: &LoadOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Dataset, TrainError> {
+        let index = read_index(root)?;
+        let first = index.first().ok_or_else(|| err(&root.join("shots.jsonl"), "no shots"))?;
+        let found = spps_in(&root.join(&first.1));
+        let spps = if opts.spps.is_empty() { found.clone() } else { opts.spps.clone() };
+        if spps.is_empty() {
+            return Err(err(&root.join(&first.1), "no noisy_<S>spp.exr files"));
+        }
+        if let Some(s) = spps.iter().find(|s| !found.contains(s)) {
+            return Err(err(&root.join(&first.1), format!("no noisy_{s}spp.exr (found {found:?})")));
+        }
+        let mut train = Vec::new();
+        let mut val = Vec::new();
+        let ntrain = index.iter().filter(|(s, _)| s == "train").count().min(opts.max_train.unwrap_or(usize::MAX));
+        let wanted: Vec<&(String, String)> = {
+            let mut k = 0;
+            index.iter().filter(|(s, _)| if s == "train" { k += 1; k <= ntrain } else { s == "val" }).collect()
+        };
+        for (i, (split, dir)) in wanted.iter().enumerate() {
+            progress(i, wanted.len());
+            let shot = load_shot(root, dir, &spps, opts)?;
+            if split == "val" { val.push(shot) } else { train.push(shot) }
+        }
+        progress(wanted.len(), wanted.len());
+        let all: Vec<&Shot> = train.iter().chain(&val).collect();
+        let (width, height) = (all.first().map_or(0, |s| s.target.width), all.first().map_or(0, |s| s.target.height));
+        if train.is_empty() {
+            return Err(err(root, "no training shots"));
+        }
+        if let Some(s) = all.iter().find(|s| s.target.width != width || s.target.height != height) {
+            return Err(err(&root.join(&s.name), format!("size differs from the first shot's {width}×{height}")));
+        }
+        Ok(Dataset { root: root.to_path_buf(), spps, train, val, width, height })
+    }
+
+    /// Bytes held by the prepared arrays (for the memory report).
+    pub fn bytes(&self) -> usize {
+        let img = |i: &PreparedImage| 4 * (i.diffuse.len() + i.specular.len() + i.g_block.len() + i.path_weight.len()) + i.passthrough.len();
+        self.train
+            .iter()
+            .chain(&self.val)
+            .map(|s| s.images.iter().map(img).sum::<usize>() + 4 * s.descriptors.as_ref().map_or(0, Vec::len) + 4 * 9 * s.target.width * s.target.height)
+            .sum()
+    }
+}
+
+/// One patch of a batch: shot index (into the split), spp index, corner.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PatchRef {
+    pub shot: usize,
+    pub spp: usize,
+    pub x: usize,
+    pub y: usize,
+}
+
+/// Cuts a patch: inputs (with the first S descriptor samples if the model needs them) and the
+/// target cropped to the output (`margin` less on each side).
+pub fn cut(shot: &Shot, spp_index: usize, spp: usize, x: usize, y: usize, patch: usize, margin: usize, with_descriptors: bool) -> (PreparedImage, PreparedTarget) {
+    let img = &shot.images[spp_index];
+    let mut crop = img.crop(x, y, patch, patch).expect("patch inside the image");
+    if with_descriptors {
+        if let Some(d) = &shot.descriptors {
+            let (w, h) = (img.width, img.height);
+            let n = w * h;
+            let mut out = Vec::with_capacity(spp * DESCRIPTOR_CHANNELS * patch * patch);
+            for p in 0..spp * DESCRIPTOR_CHANNELS {
+                for row in y..y + patch {
+                    let o = p * n + row * w + x;
+                    out.extend_from_slice(&d[o..o + patch]);
+                }
+            }
+            crop.descriptors = Some(out);
+        }
+    }
+    let o = patch - 2 * margin;
+    let t = shot.target.crop(x + margin, y + margin, o, o).expect("target inside the image");
+    (crop, t)
+}
+
+/// Tensors of a batch.
+pub fn batch_tensors(shots: &[Shot], refs: &[PatchRef], spps: &[usize], patch: usize, margin: usize, with_descriptors: bool, device: &Device) -> (InputTensors, TargetTensors) {
+    let cuts: Vec<(PreparedImage, PreparedTarget)> = refs.iter().map(|r| cut(&shots[r.shot], r.spp, spps[r.spp], r.x, r.y, patch, margin, with_descriptors)).collect();
+    let imgs: Vec<&PreparedImage> = cuts.iter().map(|c| &c.0).collect();
+    let tgts: Vec<&PreparedTarget> = cuts.iter().map(|c| &c.1).collect();
+    (PreparedImage::to_tensors(&imgs, device), PreparedTarget::to_tensors(&tgts, device))
+}

@@ -1,0 +1,442 @@
+//! Training (method.md §3, §6.2, §7.2–§7.3): data in memory, patch batches, the staged
+//! schedule, validation with best-checkpoint selection and early stopping, resumable
+//! checkpoints.
+//!
+//! - [`data`]: shots of a `pixguide dataset` folder, prepared once; cutting batches.
+//! - [`patches`]: the importance map and patch corners; the validation grid.
+//! - [`schedule`]: stages (branches → finetune; joint) and the ablations.
+//! - [`checkpoint`]: weight files, optimizer state, run state; atomic writes.
+//!
+//! Determinism: every random draw of step k of stage j (spp, shots, corners, the permutations
+//! of the disentangling loss) comes from `SplitMix64::derive(seed ^ j-tag, k)`, so a run is a
+//! function of (seed, options) and resuming at step k needs no RNG state beyond k.
+
+pub mod checkpoint;
+pub mod data;
+pub mod patches;
+pub mod schedule;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use burn::grad_clipping::GradientClippingConfig;
+use burn::module::{Module, ModuleVisitor, ParamId};
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::tensor::{Device, Tensor};
+
+use crate::loss::{l1, path_disentangling_loss, rel_mse_val};
+use crate::method::{BranchNets, Method, MethodModel, MethodOutput};
+use crate::model::DenoiserConfig;
+use crate::preprocess::TargetTensors;
+use crate::rng::SplitMix64;
+use checkpoint::{CheckpointPaths, RunState};
+use data::{batch_tensors, Dataset, PatchRef};
+use schedule::{Ablation, Stage, StageKind};
+
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    #[error("dataset: {0}")]
+    Data(String),
+    #[error("checkpoint: {0}")]
+    Checkpoint(String),
+    #[error("non-finite loss ({loss}) in stage {stage} at step {step}; batch at {spp} spp: {patches}")]
+    NonFinite { loss: f32, stage: String, step: usize, spp: usize, patches: String },
+    #[error("{0}")]
+    Options(String),
+}
+
+/// Everything that defines a run (besides the data and the initial model).
+#[derive(Clone, Debug)]
+pub struct TrainOptions {
+    pub method: Method,
+    pub ablation: Option<Ablation>,
+    pub config: DenoiserConfig,
+    pub seed: u64,
+    /// Input patch side (the output is `patch − 2·margin`).
+    pub patch: usize,
+    pub batch: usize,
+    pub stages: Vec<Stage>,
+    /// Validate every this many steps (0 = once per epoch: every training patch of the
+    /// non-overlapping grid at every spp seen once, in expectation).
+    pub val_every: usize,
+    /// Patches per validation forward pass.
+    pub val_batch: usize,
+    /// End a stage after this many validations without improvement.
+    pub patience: Option<usize>,
+    /// Write a checkpoint every this many steps (0 = only at stage ends).
+    pub checkpoint_every: usize,
+    /// Wall-clock budget of the whole run; each stage gets its share in proportion to its
+    /// steps and ends early (gracefully, with a checkpoint) when over it.
+    pub minutes: Option<f64>,
+    /// End this session after this many steps (with a checkpoint), as if interrupted; a later
+    /// `resume` continues. Not part of the run's identity.
+    pub pause_after: Option<usize>,
+    /// Extra metadata written into weight files (provenance).
+    pub metadata: BTreeMap<String, String>,
+}
+
+impl TrainOptions {
+    /// The parts a resume must agree on.
+    fn fingerprint(&self) -> String {
+        format!(
+            "{}|{:?}|{:?}|{}|{}|{}|{:?}",
+            self.method,
+            self.ablation,
+            serde_json::to_string(&self.config).unwrap_or_default(),
+            self.seed,
+            self.patch,
+            self.batch,
+            self.stages
+        )
+    }
+}
+
+/// What the trainer reports while it runs.
+#[derive(Clone, Debug)]
+pub enum Event<'a> {
+    StageStart { index: usize, stage: &'a Stage, from_step: usize, steps_per_epoch: usize },
+    Step { stage: usize, step: usize, steps: usize, loss: f64, seconds: f64, patches: usize },
+    Validation { stage: usize, step: usize, total_step: usize, rel_mse: f64, best: bool },
+    Checkpoint { path: &'a Path },
+    StageEnd { index: usize, steps: usize, reason: &'static str },
+}
+
+pub struct Outcome {
+    /// Best-validation weights of the last stage (the last weights if nothing validated).
+    pub model: MethodModel,
+    pub best_val: Option<f64>,
+    pub total_steps: usize,
+    pub seconds: f64,
+    /// The session ended at `pause_after`; resume to finish.
+    pub paused: bool,
+}
+
+/// The fresh or pretrained model a run starts from. Guided models (except Full-N-Full) take
+/// D_G from the G model and D_P + PathNet from the P model of each branch; E starts fresh.
+pub fn initial_model(opts: &TrainOptions, from_g: Option<&Path>, from_p: Option<&Path>, device: &Device) -> Result<MethodModel, TrainError> {
+    let mut cfg = opts.config.clone();
+    cfg.seed = opts.seed;
+    if opts.ablation == Some(Ablation::RadianceOnly) {
+        cfg.ensemble.radiance_only = true;
+    }
+    if opts.ablation.is_some() && opts.method != Method::Guided {
+        return Err(TrainError::Options(format!("ablations apply to the guided method, not {}", opts.method)));
+    }
+    let mut model = MethodModel::init(&cfg, opts.method, device);
+    if schedule::needs_pretrained(opts.method, opts.ablation) {
+        let (Some(g), Some(p)) = (from_g, from_p) else {
+            return Err(TrainError::Options("the guided method starts from trained G and P models: give --from-g and --from-p".into()));
+        };
+        let (gm, _) = checkpoint::load_weights(g, MethodModel::init(&cfg, Method::G, device), None)?;
+        let (pm, _) = checkpoint::load_weights(p, MethodModel::init(&cfg, Method::P, device), None)?;
+        let take = |dst: &mut BranchNets, g: BranchNets, p: BranchNets| {
+            dst.d_g = g.d_g;
+            dst.d_p = p.d_p;
+            dst.path = p.path;
+        };
+        take(&mut model.diffuse, gm.diffuse, pm.diffuse);
+        take(&mut model.specular, gm.specular, pm.specular);
+    }
+    Ok(model)
+}
+
+/// Sets which sub-modules get gradients in `stage` (frozen = no gradient at all, which also
+/// saves their backward pass).
+fn configure(model: MethodModel, stage: &Stage) -> MethodModel {
+    let (rest, e) = (stage.lr_rest.is_some(), stage.lr_e.is_some());
+    let set = |b: BranchNets| BranchNets {
+        d_g: b.d_g.map(|m| m.set_require_grad(rest)),
+        d_p: b.d_p.map(|m| m.set_require_grad(rest)),
+        d_gp: b.d_gp.map(|m| m.set_require_grad(rest)),
+        path: b.path.map(|m| m.set_require_grad(rest)),
+        e: b.e.map(|m| m.set_require_grad(e)),
+    };
+    MethodModel { diffuse: set(model.diffuse), specular: set(model.specular) }
+}
+
+#[derive(Default)]
+struct Ids(Vec<ParamId>);
+impl ModuleVisitor for Ids {
+    fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<Tensor<D>>) {
+        self.0.push(param.id);
+    }
+}
+
+fn e_ids(model: &MethodModel) -> Vec<ParamId> {
+    let mut ids = Ids::default();
+    for b in [&model.diffuse, &model.specular] {
+        if let Some(e) = &b.e {
+            e.visit(&mut ids);
+        }
+    }
+    ids.0
+}
+
+/// The loss of `stage` for one forward pass.
+pub fn stage_loss(out: MethodOutput, t: &TargetTensors, stage: &Stage, rng: &mut SplitMix64) -> Tensor<1> {
+    match stage.kind {
+        StageKind::Finetune => l1(out.radiance, t.total.clone()),
+        StageKind::Branches | StageKind::Joint => {
+            let mut loss = l1(out.diffuse.output, t.diffuse.clone()) + l1(out.specular.output, t.specular.clone());
+            if stage.w_path > 0.0 {
+                for (p, target) in [(out.diffuse.path, &t.diffuse), (out.specular.path, &t.specular)] {
+                    if let Some(p) = p {
+                        loss = loss + path_disentangling_loss(p.samples, target.clone(), rng).mul_scalar(stage.w_path);
+                    }
+                }
+            }
+            loss
+        }
+    }
+}
+
+/// Stream tag of stage `k` (distinct streams per stage, same seed).
+fn stage_seed(seed: u64, k: usize) -> u64 {
+    seed ^ (k as u64 + 1).wrapping_mul(0xA24B_AED4_963E_E407)
+}
+
+/// The patches of step `step` of stage `k`: one spp for the whole batch (tensors need equal
+/// shapes), shots uniform, corners from each shot's sampler.
+pub fn draw_batch(data: &Dataset, opts: &TrainOptions, k: usize, step: usize) -> (Vec<PatchRef>, SplitMix64) {
+    let mut rng = SplitMix64::derive(stage_seed(opts.seed, k), step as u64);
+    let spp = rng.below(data.spps.len());
+    let refs = (0..opts.batch)
+        .map(|_| {
+            let shot = rng.below(data.train.len());
+            let (x, y) = data.train[shot].sampler.sample(&mut rng);
+            PatchRef { shot, spp, x, y }
+        })
+        .collect();
+    (refs, rng)
+}
+
+fn describe(data: &Dataset, refs: &[PatchRef]) -> String {
+    refs.iter().map(|r| format!("{} @({},{})", data.train[r.shot].name, r.x, r.y)).collect::<Vec<_>>().join(", ")
+}
+
+/// One optimisation step on a given batch. Returns the updated model and the loss value, or the
+/// non-finite loss (the caller names the batch).
+pub fn train_step(
+    model: MethodModel,
+    optim: &mut ModuleOptimizer,
+    input: crate::preprocess::InputTensors,
+    target: &TargetTensors,
+    stage: &Stage,
+    e_params: &[ParamId],
+    rng: &mut SplitMix64,
+) -> Result<(MethodModel, f32), f32> {
+    let out = model.forward(input);
+    let loss = stage_loss(out, target, stage, rng);
+    let value: f32 = loss.clone().into_scalar();
+    if !value.is_finite() {
+        return Err(value);
+    }
+    let mut grads = loss.backward();
+    let mut model = model;
+    if let Some(lr) = stage.lr_e {
+        let g = GradientsParams::from_params(&mut grads, &model, e_params);
+        model = optim.step(lr, model, g);
+    }
+    if let Some(lr) = stage.lr_rest {
+        let g = GradientsParams::from_grads(grads, &model);
+        model = optim.step(lr, model, g);
+    }
+    Ok((model, value))
+}
+
+/// Adam as method.md §3: β = (0.9, 0.999), ε = 1e-8, no decay, gradient values clipped to ±1.
+pub fn optimizer() -> ModuleOptimizer {
+    AdamConfig::new().with_beta_1(0.9).with_beta_2(0.999).with_epsilon(1e-8).with_grad_clipping(Some(GradientClippingConfig::Value(1.0))).init()
+}
+
+/// relMSE_val (method.md §7.3) over the fixed validation grid of every val shot at every spp,
+/// mean over patches. `None` without validation shots.
+pub fn validate(model: &MethodModel, data: &Dataset, opts: &TrainOptions) -> Option<f64> {
+    if data.val.is_empty() {
+        return None;
+    }
+    let m = model.valid();
+    let dev = crate::cpu_device();
+    let margin = opts.config.margin();
+    let grid = patches::grid(data.width, data.height, opts.patch);
+    let with_desc = opts.method.needs_descriptors();
+    let mut refs = Vec::new();
+    for shot in 0..data.val.len() {
+        for spp in 0..data.spps.len() {
+            for &(x, y) in &grid {
+                refs.push(PatchRef { shot, spp, x, y });
+            }
+        }
+    }
+    let (mut sum, mut n) = (0.0f64, 0usize);
+    // Chunks never mix sample counts (tensor shapes must agree): refs are grouped by spp.
+    let mut i = 0;
+    while i < refs.len() {
+        let mut j = i + 1;
+        while j < refs.len() && j - i < opts.val_batch.max(1) && refs[j].spp == refs[i].spp && refs[j].shot == refs[i].shot {
+            j += 1;
+        }
+        let chunk = &refs[i..j];
+        let (input, target) = batch_tensors(&data.val, chunk, &data.spps, opts.patch, margin, with_desc, &dev);
+        let out = m.forward(input);
+        let v: f32 = rel_mse_val(out.radiance, target.total).into_scalar();
+        sum += v as f64 * chunk.len() as f64;
+        n += chunk.len();
+        i = j;
+    }
+    Some(sum / n as f64)
+}
+
+/// Runs the schedule from `model` (or from the checkpoint in `ckpt_dir` when `resume` and one
+/// exists).
+pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Option<&Path>, resume: bool, events: &mut dyn FnMut(Event)) -> Result<Outcome, TrainError> {
+    if opts.patch <= 2 * opts.config.margin() {
+        return Err(TrainError::Options(format!("patch {} leaves no output with the {} px margin", opts.patch, opts.config.margin())));
+    }
+    if opts.batch == 0 {
+        return Err(TrainError::Options("batch must be ≥ 1".into()));
+    }
+    let device = crate::cpu_training_device();
+    let ckpt = ckpt_dir.map(|d| CheckpointPaths { dir: d.to_path_buf() });
+    let started = Instant::now();
+    let mut model = model;
+    let mut optim = optimizer();
+    let mut st = RunState { stage: 0, step: 0, total_steps: 0, best_val: None, best_step: None, since_best: 0, elapsed: 0.0, param_ids: BTreeMap::new(), options: opts.fingerprint() };
+    if let (Some(c), true) = (&ckpt, resume) {
+        if c.state().exists() {
+            let s = checkpoint::load_state(&c.state())?;
+            if s.options != st.options {
+                return Err(TrainError::Checkpoint(format!("{} was written by a run with other options; use another --checkpoint-dir or the same options", c.state().display())));
+            }
+            let (m, _) = checkpoint::load_weights(&c.weights(), model, Some(&s.param_ids))?;
+            model = m;
+            if c.optimizer().exists() {
+                optim = checkpoint::load_optimizer(&c.optimizer(), optim)?;
+            }
+            st = s;
+        }
+    }
+    let _ = device;
+    let total_planned: usize = opts.stages.iter().map(|s| s.steps).sum::<usize>().max(1);
+    let margin = opts.config.margin();
+    let with_desc = opts.method.needs_descriptors();
+    let epoch = (data.train.len() * data.spps.len() * patches::grid(data.width, data.height, opts.patch).len()).div_ceil(opts.batch).max(1);
+    let val_every = if opts.val_every == 0 { epoch } else { opts.val_every };
+    let session_elapsed = st.elapsed;
+    let elapsed = |started: &Instant| session_elapsed + started.elapsed().as_secs_f64();
+
+    let mut best_model: Option<MethodModel> = None;
+    let mut session_steps = 0usize;
+    while st.stage < opts.stages.len() {
+        let k = st.stage;
+        let stage = &opts.stages[k];
+        if stage.steps == 0 {
+            st.stage += 1;
+            continue;
+        }
+        model = configure(model, stage);
+        let e_params = e_ids(&model);
+        events(Event::StageStart { index: k, stage, from_step: st.step, steps_per_epoch: epoch });
+        let cum: usize = opts.stages[..=k].iter().map(|s| s.steps).sum();
+        let deadline = opts.minutes.map(|m| m * 60.0 * cum as f64 / total_planned as f64);
+        let mut reason = "steps done";
+        while st.step < stage.steps {
+            if deadline.is_some_and(|d| elapsed(&started) >= d) {
+                reason = "time budget";
+                break;
+            }
+            if opts.pause_after.is_some_and(|p| session_steps >= p) {
+                if let Some(c) = &ckpt {
+                    st.elapsed = elapsed(&started);
+                    save_checkpoint(c, &model, &optim, &mut st, &opts.metadata)?;
+                }
+                return Ok(Outcome { model, best_val: st.best_val, total_steps: st.total_steps, seconds: elapsed(&started), paused: true });
+            }
+            session_steps += 1;
+            let t0 = Instant::now();
+            let (refs, mut rng) = draw_batch(data, opts, k, st.step);
+            let (input, target) = batch_tensors(&data.train, &refs, &data.spps, opts.patch, margin, with_desc, &crate::cpu_training_device());
+            let (m, loss) = match train_step(model, &mut optim, input, &target, stage, &e_params, &mut rng) {
+                Ok(r) => r,
+                Err(loss) => {
+                    return Err(TrainError::NonFinite { loss, stage: stage.kind.name().into(), step: st.step, spp: data.spps[refs[0].spp], patches: describe(data, &refs) });
+                }
+            };
+            model = m;
+            st.step += 1;
+            st.total_steps += 1;
+            events(Event::Step { stage: k, step: st.step, steps: stage.steps, loss: loss as f64, seconds: t0.elapsed().as_secs_f64(), patches: refs.len() });
+            if st.step % val_every == 0 || st.step == stage.steps {
+                if let Some(v) = validate(&model, data, opts) {
+                    let best = st.best_val.is_none_or(|b| v < b);
+                    if best {
+                        st.best_val = Some(v);
+                        st.best_step = Some(st.step);
+                        st.since_best = 0;
+                        best_model = Some(model.clone());
+                        if let Some(c) = &ckpt {
+                            checkpoint::save_weights(&c.best(k), &model, &opts.metadata)?;
+                        }
+                    } else {
+                        st.since_best += 1;
+                    }
+                    events(Event::Validation { stage: k, step: st.step, total_step: st.total_steps, rel_mse: v, best });
+                    if opts.patience.is_some_and(|p| st.since_best >= p) {
+                        reason = "early stop";
+                        break;
+                    }
+                }
+            }
+            if opts.checkpoint_every > 0 && st.step % opts.checkpoint_every == 0 && st.step < stage.steps {
+                if let Some(c) = &ckpt {
+                    st.elapsed = elapsed(&started);
+                    save_checkpoint(c, &model, &optim, &mut st, &opts.metadata)?;
+                    events(Event::Checkpoint { path: &c.dir });
+                }
+            }
+        }
+        events(Event::StageEnd { index: k, steps: st.step, reason });
+        // Continue from the stage's best validated weights (method.md §3: keep the best).
+        if let Some(b) = best_model.take() {
+            model = b;
+        } else if let (Some(c), Some(_)) = (&ckpt, st.best_val) {
+            // Resumed after the best validation: it is only on disk.
+            if c.best(k).exists() {
+                model = checkpoint::load_weights(&c.best(k), model, None)?.0;
+            }
+        }
+        // A stage of zero steps (e.g. --finetune-steps 0) keeps the previous stage's best.
+        let last = opts.stages[k + 1..].iter().all(|s| s.steps == 0);
+        if !last {
+            st.best_val = None;
+            st.best_step = None;
+            st.since_best = 0;
+        }
+        st.stage += 1;
+        st.step = 0;
+        if let Some(c) = &ckpt {
+            st.elapsed = elapsed(&started);
+            save_checkpoint(c, &model, &optim, &mut st, &opts.metadata)?;
+            events(Event::Checkpoint { path: &c.dir });
+        }
+    }
+    Ok(Outcome { model, best_val: st.best_val, total_steps: st.total_steps, seconds: elapsed(&started), paused: false })
+}
+
+fn save_checkpoint(c: &CheckpointPaths, model: &MethodModel, optim: &ModuleOptimizer, st: &mut RunState, meta: &BTreeMap<String, String>) -> Result<(), TrainError> {
+    st.param_ids = checkpoint::param_ids(model);
+    checkpoint::save_weights(&c.weights(), model, meta)?;
+    checkpoint::save_optimizer(&c.optimizer(), optim)?;
+    checkpoint::save_state(&c.state(), st)
+}
+
+/// Default checkpoint folder next to an output file: `<output>.ckpt/`.
+pub fn default_checkpoint_dir(output: &Path) -> PathBuf {
+    let mut s = output.as_os_str().to_owned();
+    s.push(".ckpt");
+    PathBuf::from(s)
+}
+
+#[cfg(test)]
+mod tests;

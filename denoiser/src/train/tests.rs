@@ -1,0 +1,258 @@
+use super::*;
+use crate::ensemble::EnsembleConfig;
+use crate::kpcn::KpcnConfig;
+use crate::pathnet::PathNetConfig;
+use crate::preprocess::{prepare, prepare_target, PreparedImage};
+use checkpoint::flat_values;
+use data::Shot;
+use patches::PatchSampler;
+use renderer::film::descriptors::{field, FIELDS};
+use renderer::film::{Descriptors, Frame, PixelBuffer};
+use schedule::ScheduleOptions;
+
+fn tiny() -> DenoiserConfig {
+    DenoiserConfig::new(
+        KpcnConfig::new(34).with_depth(2).with_width(8).with_conv_kernel(3).with_filter_size(3),
+        PathNetConfig::new().with_embed_width(8).with_unet_widths(vec![8, 8]).with_convs_per_block(1).with_out_hidden(8),
+        EnsembleConfig::new().with_depth(2).with_width(6).with_conv_kernel(3),
+    )
+}
+
+const W: usize = 20;
+const PATCH: usize = 12;
+
+/// A synthetic shot: a smooth reference with an edge, a noisy render = reference + noise at
+/// each spp, random but plausible descriptors.
+fn shot(name: &str, seed: u64, spps: &[usize]) -> Shot {
+    let mut rng = SplitMix64::new(seed);
+    let n = W * W;
+    let refc: Vec<f32> = (0..3 * n).map(|k| { let i = k / 3; let x = i % W; 0.2 + if x > W / 2 { 0.6 } else { 0.1 } + 0.05 * (k % 3) as f32 }).collect();
+    let buf = |ch: usize, mean: Vec<f32>, var: f32| PixelBuffer { channels: ch, var: vec![var; mean.len()], mean };
+    let max = *spps.iter().max().unwrap() as u32;
+    let mut desc = Descriptors::new(W as u32, W as u32, max);
+    for (k, v) in desc.data.iter_mut().enumerate() {
+        let f = k % FIELDS;
+        *v = if (field::BOUNCE_TYPE..field::ROUGHNESS).contains(&f) { [4.0, 8.0, 17.0][rng.below(3)] } else { rng.next_f64() as f32 };
+    }
+    let noisy = |rng: &mut SplitMix64, s: usize| {
+        let mut noise = |v: &[f32], amp: f32| -> Vec<f32> { v.iter().map(|x| (x + amp * (rng.next_f64() as f32 - 0.5) / s as f32).max(0.0)).collect() };
+        let diff: Vec<f32> = noise(&refc, 0.4).iter().map(|x| x * 0.7).collect();
+        let spec: Vec<f32> = noise(&refc, 0.4).iter().map(|x| x * 0.3).collect();
+        let rad: Vec<f32> = diff.iter().zip(&spec).map(|(a, b)| a + b).collect();
+        Frame {
+            width: W as u32,
+            height: W as u32,
+            spp: s as u32,
+            radiance: buf(3, rad, 0.01),
+            diffuse: Some(buf(3, diff, 0.01)),
+            specular: Some(buf(3, spec, 0.01)),
+            albedo: Some(buf(3, vec![0.6; 3 * n], 0.0)),
+            normal: Some(buf(3, (0..3 * n).map(|k| if k % 3 == 2 { 1.0 } else { 0.0 }).collect(), 0.0)),
+            depth: Some(buf(1, (0..n).map(|i| 0.1 + 0.01 * (i % W) as f32).collect(), 0.0)),
+            depth_scale: 1.0,
+            descriptors: Some(desc.clone()),
+            nonfinite_samples: 0,
+        }
+    };
+    let mut images: Vec<PreparedImage> = Vec::new();
+    let mut descriptors = None;
+    for &s in spps {
+        let mut img = prepare(&noisy(&mut rng, s)).unwrap();
+        if s as u32 == max {
+            descriptors = img.descriptors.take();
+        }
+        img.descriptors = None;
+        images.push(img);
+    }
+    let mut reference = noisy(&mut rng, 1_000_000);
+    reference.radiance.mean = refc.clone();
+    reference.diffuse.as_mut().unwrap().mean = refc.iter().map(|x| x * 0.7).collect();
+    Shot { name: name.into(), images, descriptors, target: prepare_target(&reference).unwrap(), sampler: PatchSampler::uniform(W, W, PATCH) }
+}
+
+fn dataset() -> Dataset {
+    let spps = vec![2, 4];
+    Dataset {
+        root: "synthetic".into(),
+        train: (0..3).map(|i| shot(&format!("train/s{i}"), i, &spps)).collect(),
+        val: vec![shot("val/v", 99, &spps)],
+        spps,
+        width: W,
+        height: W,
+    }
+}
+
+fn options(method: Method, ablation: Option<Ablation>, sched: &ScheduleOptions) -> TrainOptions {
+    TrainOptions {
+        method,
+        ablation,
+        config: tiny(),
+        seed: 5,
+        patch: PATCH,
+        batch: 2,
+        stages: schedule::plan(method, ablation, sched),
+        val_every: 3,
+        val_batch: 4,
+        patience: None,
+        checkpoint_every: 2,
+        minutes: None,
+        pause_after: None,
+        metadata: BTreeMap::new(),
+    }
+}
+
+fn short() -> ScheduleOptions {
+    ScheduleOptions { branch_steps: 4, finetune_steps: 2, joint_steps: 3, scratch_steps: 3, ..Default::default() }
+}
+
+fn tmpdir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("pixguide-train-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn train(data: &Dataset, o: &TrainOptions, dir: Option<&Path>, resume: bool) -> Outcome {
+    let m = initial_model(o, None, None, &crate::cpu_training_device()).unwrap();
+    run(data, o, m, dir, resume, &mut |_| {}).unwrap()
+}
+
+/// ~30 Adam steps on one fixed batch (so the loss is a deterministic function of the weights)
+/// must lower the per-branch L1 of a tiny P model (PathNet + D_P, L_path on) well below its
+/// start. At lr 1e-3 the tiny model can fit one batch much better than its initial (near-box
+/// filter) output; 0.8× is far from noise (the loss on a fixed batch has no sampling noise,
+/// only the fresh L_path permutations, whose term is ~1 % of the total here) yet lenient
+/// enough for any correct gradient path. A broken gradient (wrong sign, no update, detached
+/// output) leaves the ratio ≥ 1.
+#[test]
+fn tiny_model_fits_a_fixed_batch() {
+    let data = dataset();
+    let o = options(Method::P, None, &short());
+    let dev = crate::cpu_training_device();
+    let mut model = initial_model(&o, None, None, &dev).unwrap();
+    let stage = Stage { kind: StageKind::Branches, steps: 30, lr_rest: Some(1e-3), lr_e: None, w_path: 0.1 };
+    let (refs, _) = draw_batch(&data, &o, 0, 0);
+    let mut optim = optimizer();
+    let mut losses = Vec::new();
+    for step in 0..30 {
+        let (input, target) = batch_tensors(&data.train, &refs, &data.spps, PATCH, o.config.margin(), true, &dev);
+        let mut rng = SplitMix64::new(step);
+        let (m, loss) = train_step(model, &mut optim, input, &target, &stage, &[], &mut rng).unwrap();
+        model = m;
+        losses.push(loss);
+    }
+    let (first, last) = (losses[0], *losses.last().unwrap());
+    assert!(last < 0.8 * first, "loss {first} → {last}: {losses:?}");
+}
+
+/// Training N steps straight equals N/2, a checkpoint, a fresh process state, and N/2 more —
+/// bit for bit, across a stage boundary (branches → finetune) and with validation in between.
+#[test]
+fn resume_equals_uninterrupted() {
+    let data = dataset();
+    let o = options(Method::G, None, &short());
+    let straight = train(&data, &o, Some(&tmpdir("straight")), false);
+    let dir = tmpdir("resume");
+    let mut first = o.clone();
+    first.pause_after = Some(3);
+    let half = train(&data, &first, Some(&dir), false);
+    assert!(half.paused);
+    let mut again = o.clone();
+    again.pause_after = Some(2); // crosses into the finetune stage
+    let more = train(&data, &again, Some(&dir), true);
+    assert!(more.paused && more.total_steps == 5);
+    let rest = train(&data, &o, Some(&dir), true);
+    assert!(!rest.paused);
+    assert_eq!(rest.total_steps, straight.total_steps);
+    assert_eq!(flat_values(&rest.model), flat_values(&straight.model));
+    assert_eq!(rest.best_val, straight.best_val);
+    // Control: a resume that skipped the optimizer state would differ.
+    let dir2 = tmpdir("resume-noopt");
+    let _ = train(&data, &first, Some(&dir2), false);
+    std::fs::remove_file(dir2.join("optimizer.bpk")).unwrap();
+    let broken = train(&data, &o, Some(&dir2), true);
+    assert_ne!(flat_values(&broken.model), flat_values(&straight.model));
+    // A resume with other options is refused.
+    let mut other = o.clone();
+    other.seed = 6;
+    let m = initial_model(&other, None, None, &crate::cpu_training_device()).unwrap();
+    assert!(matches!(run(&data, &other, m, Some(&dir), true, &mut |_| {}), Err(TrainError::Checkpoint(_))));
+}
+
+/// Same seed → same trained weights; another seed → different ones. Guided joint stage from
+/// scratch (Full-N-Full), so every network and both learning-rate groups take part.
+#[test]
+fn same_seed_same_weights() {
+    let data = dataset();
+    let o = options(Method::Guided, Some(Ablation::FullNFull), &short());
+    let a = flat_values(&train(&data, &o, None, false).model);
+    let b = flat_values(&train(&data, &o, None, false).model);
+    assert_eq!(a, b);
+    let mut o2 = o.clone();
+    o2.seed = 77;
+    assert_ne!(a, flat_values(&train(&data, &o2, None, false).model));
+}
+
+/// Thread count must not change the result (flex splits work over rayon; a reduction whose
+/// order depended on the split would show up here as differing low bits).
+#[test]
+fn same_weights_with_one_or_two_threads() {
+    let data = dataset();
+    let o = options(Method::Guided, Some(Ablation::FullNFull), &short());
+    let pool = |n| rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
+    let a = pool(1).install(|| flat_values(&train(&data, &o, None, false).model));
+    let b = pool(2).install(|| flat_values(&train(&data, &o, None, false).model));
+    let differing = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+    assert_eq!(differing, 0, "{differing} of {} weights differ between 1 and 2 threads", a.len());
+}
+
+/// Fix-N-Train changes only E; the joint stage of the guided method changes E and the rest.
+#[test]
+fn fix_n_train_updates_only_e() {
+    let data = dataset();
+    let dev = crate::cpu_training_device();
+    let o = options(Method::Guided, Some(Ablation::FixNTrain), &short());
+    let mut cfg = o.config.clone();
+    cfg.seed = o.seed;
+    let before = MethodModel::init(&cfg, Method::Guided, &dev);
+    let after = run(&data, &o, MethodModel::init(&cfg, Method::Guided, &dev), None, false, &mut |_| {}).unwrap().model;
+    let p = |m: &MethodModel| checkpoint::parameters(m).into_iter().map(|(n, _, _, v)| (n, v)).collect::<Vec<_>>();
+    for ((name, v0), (_, v1)) in p(&before).into_iter().zip(p(&after)) {
+        let is_e = name.starts_with("diffuse.e.") || name.starts_with("specular.e.");
+        assert_eq!(v0 != v1, is_e, "{name}: changed = {}", v0 != v1);
+    }
+}
+
+/// A batch whose target is infinite gives a non-finite loss: training stops with an error
+/// naming the stage, step, spp and the shots and corners of the batch.
+#[test]
+fn non_finite_loss_names_the_batch() {
+    let mut data = dataset();
+    for s in &mut data.train {
+        s.target.diffuse.iter_mut().for_each(|v| *v = f32::INFINITY);
+    }
+    let o = options(Method::G, None, &short());
+    let m = initial_model(&o, None, None, &crate::cpu_training_device()).unwrap();
+    let err = run(&data, &o, m, None, false, &mut |_| {}).err().expect("must abort");
+    let msg = err.to_string();
+    assert!(matches!(err, TrainError::NonFinite { step: 0, .. }), "{msg}");
+    let (refs, _) = draw_batch(&data, &o, 0, 0);
+    for r in &refs {
+        assert!(msg.contains(&format!("{} @({},{})", data.train[r.shot].name, r.x, r.y)), "{msg}");
+    }
+}
+
+/// Weights written and read back are identical, and a file for another method is refused.
+#[test]
+fn weights_round_trip_and_mismatch() {
+    let dev = crate::cpu_training_device();
+    let cfg = tiny();
+    let g = MethodModel::init(&cfg, Method::G, &dev);
+    let path = tmpdir("weights").join("g.safetensors");
+    checkpoint::save_weights(&path, &g, &BTreeMap::from([("method".to_string(), "g".to_string())])).unwrap();
+    let fresh = MethodModel::init(&cfg.clone().with_seed(9), Method::G, &dev);
+    assert_ne!(flat_values(&fresh), flat_values(&g));
+    let (back, meta) = checkpoint::load_weights(&path, fresh, None).unwrap();
+    assert_eq!(flat_values(&back), flat_values(&g));
+    assert_eq!(meta.get("method").map(String::as_str), Some("g"));
+    assert!(checkpoint::load_weights(&path, MethodModel::init(&cfg, Method::P, &dev), None).is_err());
+}

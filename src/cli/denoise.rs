@@ -1,0 +1,281 @@
+//! `pixguide denoise`, and the in-process denoising that `pixguide render --denoise` shares.
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use denoiser::infer::{self, Denoised, InferOptions};
+use denoiser::method::Method;
+use denoiser::metrics;
+use denoiser::weights::{self, Loaded};
+use renderer::film::descriptors::Descriptors;
+use renderer::film::{self, Frame, PixelBuffer};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(Args)]
+pub struct DenoiseArgs {
+    /// Noisy frame EXR written by `pixguide render --aovs` (needs the diffuse/specular split and
+    /// the G-buffers).
+    pub frame: PathBuf,
+    /// Per-sample path descriptors (default: `<frame stem>.descriptors.safetensors` beside the
+    /// frame). Needed by the p, both and guided models.
+    #[arg(long)]
+    pub descriptors: Option<PathBuf>,
+    /// Denoiser: guided (the paper's method), g (KPCN on G-buffers), p (KPCN on P-buffers),
+    /// both (KPCN on G- and P-buffers).
+    #[arg(long, default_value = "guided", value_parser = parse_method)]
+    pub model: Method,
+    /// Weight file (default: denoiser/weights/<model>-default.safetensors).
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+    /// Output EXR (denoised radiance).
+    #[arg(short, long, default_value = "denoised.exr")]
+    pub output: PathBuf,
+    /// Also write a tone-mapped PNG preview here.
+    #[arg(long)]
+    pub png: Option<PathBuf>,
+    /// Write W_G (the G-buffer denoiser's share per pixel, guided model only) as a colour-mapped
+    /// PNG: diffuse branch left, specular branch right, viridis from W_G = 0 (dark) to 1 (yellow).
+    #[arg(long)]
+    pub weights_png: Option<PathBuf>,
+    /// Reference EXR: print relMSE and 1 − SSIM of the noisy and the denoised image.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+    #[command(flatten)]
+    pub infer: InferArgs,
+}
+
+/// Options shared with `render --denoise`.
+#[derive(Args, Clone)]
+pub struct InferArgs {
+    /// Output tile side of tiled inference (pixels); memory grows with its square.
+    #[arg(long, default_value_t = 128)]
+    pub tile: usize,
+    /// Tiles per network pass.
+    #[arg(long, default_value_t = 2)]
+    pub batch: usize,
+}
+
+impl InferArgs {
+    pub fn options(&self) -> InferOptions {
+        InferOptions { tile: self.tile.max(8), batch: self.batch.max(1) }
+    }
+}
+
+pub fn parse_method(s: &str) -> std::result::Result<Method, String> {
+    Method::parse(s).ok_or_else(|| format!("unknown model `{s}` (expected guided, g, p or both)"))
+}
+
+/// Where the shipped weights of `method` live: `denoiser/weights/<method>-default.safetensors`
+/// under the current directory if that exists, else under the source tree this binary was built
+/// from.
+pub fn default_weights(method: Method) -> PathBuf {
+    let rel = PathBuf::from("denoiser/weights").join(format!("{}-default.safetensors", method.name()));
+    if rel.exists() {
+        return rel;
+    }
+    let built = Path::new(env!("CARGO_MANIFEST_DIR")).join(&rel);
+    if built.exists() {
+        built
+    } else {
+        rel
+    }
+}
+
+/// Loads the weights for `method` (from `file`, or the default file), and checks that they are
+/// weights of that method.
+pub fn load_weights(method: Method, file: Option<&Path>) -> Result<Loaded> {
+    let path = file.map(Path::to_path_buf).unwrap_or_else(|| default_weights(method));
+    if !path.exists() {
+        if file.is_some() {
+            bail!("weight file {} does not exist", path.display());
+        }
+        bail!(
+            "no weights for the {method} model: {} does not exist. Train them with \
+             `pixguide train --model {method}` (see docs/denoiser-design.md), or pass --weights FILE",
+            path.display()
+        );
+    }
+    let loaded = weights::load(&path, &denoiser::cpu_device())?;
+    if loaded.method != method {
+        bail!("{} holds weights of the {} model, not {method} (choose --model {})", path.display(), loaded.method, loaded.method);
+    }
+    Ok(loaded)
+}
+
+/// Result of [`denoise_frame`] with its timing.
+pub struct DenoiseRun {
+    pub denoised: Denoised,
+    /// Preprocessing (method.md §2, §4.1) seconds.
+    pub prepare_s: f64,
+    /// Heap bytes allocated above the level at the start, at the peak.
+    pub peak_extra_bytes: usize,
+}
+
+/// Preprocesses and denoises a frame in memory. The descriptors are dropped from the frame once
+/// preprocessed (they are the largest buffer and the prepared copy replaces them).
+pub fn denoise_frame(frame: &mut Frame, loaded: &Loaded, opts: &InferOptions) -> Result<DenoiseRun> {
+    let base = crate::alloc_stats::reset_peak();
+    let t = Instant::now();
+    if loaded.method.needs_descriptors() && frame.descriptors.is_none() {
+        bail!("the {} model needs per-sample path descriptors, and the frame has none", loaded.method);
+    }
+    let prepared = denoiser::preprocess::prepare(frame)?;
+    frame.descriptors = None;
+    let prepare_s = t.elapsed().as_secs_f64();
+    let denoised = infer::denoise(&loaded.model, &loaded.config, &prepared, &frame.radiance.mean, opts, &denoiser::cpu_device())?;
+    let peak_extra_bytes = crate::alloc_stats::peak().saturating_sub(base);
+    Ok(DenoiseRun { denoised, prepare_s, peak_extra_bytes })
+}
+
+/// A frame holding only the denoised radiance (variance 0: it is no longer a sample mean).
+pub fn denoised_frame(d: &Denoised, spp: u32) -> Frame {
+    let n = d.width * d.height;
+    let mut radiance = PixelBuffer::new(3, n);
+    radiance.mean.copy_from_slice(&d.radiance);
+    Frame {
+        width: d.width as u32,
+        height: d.height as u32,
+        spp,
+        radiance,
+        diffuse: None,
+        specular: None,
+        albedo: None,
+        normal: None,
+        depth: None,
+        depth_scale: 1.0,
+        descriptors: None,
+        nonfinite_samples: 0,
+    }
+}
+
+/// W_G of both branches side by side, viridis-coloured, each under a label.
+pub fn write_weights_png(path: &Path, d: &Denoised) -> Result<()> {
+    let Some(maps) = &d.weights_g else {
+        bail!("--weights-png needs the guided model (only it blends two denoisers)");
+    };
+    let (w, h) = (d.width as u32, d.height as u32);
+    let (gap, label) = (4u32, 12u32);
+    let sw = 2 * w + gap;
+    let sh = h + label;
+    let mut px = vec![32u8; (sw * sh * 3) as usize];
+    for (k, (name, map)) in [("W_G diffuse", &maps.diffuse), ("W_G specular", &maps.specular)].into_iter().enumerate() {
+        let x0 = k as u32 * (w + gap);
+        for y in 0..h {
+            for x in 0..w {
+                let v = map[(y * w + x) as usize].clamp(0.0, 1.0) as f64;
+                let c = colorous::VIRIDIS.eval_continuous(v);
+                let o = (((label + y) * sw + x0 + x) * 3) as usize;
+                px[o..o + 3].copy_from_slice(&[c.r, c.g, c.b]);
+            }
+        }
+        if w >= 40 {
+            super::font::draw_text(&mut px, sw, x0 + 2, 2, name);
+        }
+    }
+    ensure_parent(path)?;
+    film::png::write_rgb8(path, sw, sh, px).with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+pub fn ensure_parent(path: &Path) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating the output folder {}", dir.display()))?;
+    }
+    Ok(())
+}
+
+/// Reads a reference EXR and checks its size against `w × h`.
+pub fn read_reference(path: &Path, w: u32, h: u32) -> Result<Frame> {
+    let r = film::exr_io::read_frame(path).with_context(|| format!("reading the reference {}", path.display()))?;
+    if (r.width, r.height) != (w, h) {
+        bail!("reference {} is {}×{} but the image is {w}×{h}", path.display(), r.width, r.height);
+    }
+    Ok(r)
+}
+
+/// One line of errors against the reference (method.md §7.3).
+pub fn error_line(label: &str, rgb: &[f32], reference: &Frame) -> String {
+    let (w, h) = (reference.width as usize, reference.height as usize);
+    let e = metrics::evaluate(rgb, &reference.radiance.mean, w, h, metrics::DEFAULT_BORDER);
+    format!(
+        "{label:>9}: relMSE {:.5} (gamma {:.5}), 1-SSIM {:.5}",
+        e.rel_mse, e.rel_mse_gamma, e.one_minus_ssim
+    )
+}
+
+pub fn print_denoise_summary(loaded: &Loaded, run: &DenoiseRun) {
+    let t = &run.denoised.timings;
+    println!(
+        "denoise ({} model, preset {}): {:.2} s = preprocess {:.2} s + networks {:.2} s + tiling {:.2} s; {} windows of {}², peak heap +{:.0} MiB",
+        loaded.method,
+        if loaded.preset.is_empty() { "?" } else { &loaded.preset },
+        run.prepare_s + t.total_s,
+        run.prepare_s,
+        t.forward_s,
+        t.gather_s,
+        t.windows,
+        t.window,
+        run.peak_extra_bytes as f64 / (1024.0 * 1024.0)
+    );
+}
+
+pub fn run(a: DenoiseArgs) -> Result<()> {
+    // Weights first: a missing file should not cost the time of reading a large frame.
+    let loaded = load_weights(a.model, a.weights.as_deref())?;
+    let mut frame = film::exr_io::read_frame(&a.frame).with_context(|| format!("reading {}", a.frame.display()))?;
+    for (name, b) in [("diffuse", &frame.diffuse), ("specular", &frame.specular), ("albedo", &frame.albedo), ("normal", &frame.normal), ("depth", &frame.depth)] {
+        if b.is_none() {
+            bail!("{} has no {name} buffer: the denoiser needs the frame written by `pixguide render --aovs`", a.frame.display());
+        }
+    }
+    if loaded.method.needs_descriptors() {
+        let path = a.descriptors.clone().unwrap_or_else(|| {
+            let stem = a.frame.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            a.frame.with_file_name(format!("{stem}.descriptors.safetensors"))
+        });
+        if !path.exists() {
+            bail!(
+                "the {} model needs per-sample path descriptors: {} does not exist (render with --aovs, pass --descriptors FILE, or use --model g)",
+                loaded.method,
+                path.display()
+            );
+        }
+        let d = Descriptors::read_safetensors(&path).with_context(|| format!("reading {}", path.display()))?;
+        if d.width != frame.width || d.height != frame.height || d.spp < frame.spp {
+            bail!(
+                "{}: descriptors are {}×{} at {} spp but {} is {}×{} at {} spp",
+                path.display(),
+                d.width,
+                d.height,
+                d.spp,
+                a.frame.display(),
+                frame.width,
+                frame.height,
+                frame.spp
+            );
+        }
+        frame.descriptors = Some(d);
+    }
+    let run = denoise_frame(&mut frame, &loaded, &a.infer.options()).with_context(|| format!("denoising {}", a.frame.display()))?;
+    print_denoise_summary(&loaded, &run);
+    write_outputs(&run.denoised, frame.spp, &a.output, a.png.as_deref(), a.weights_png.as_deref())?;
+    if let Some(r) = &a.reference {
+        let reference = read_reference(r, frame.width, frame.height)?;
+        println!("{}", error_line("noisy", &frame.radiance.mean, &reference));
+        println!("{}", error_line("denoised", &run.denoised.radiance, &reference));
+    }
+    Ok(())
+}
+
+pub fn write_outputs(d: &Denoised, spp: u32, output: &Path, png: Option<&Path>, weights_png: Option<&Path>) -> Result<()> {
+    ensure_parent(output)?;
+    film::exr_io::write_frame(&denoised_frame(d, spp), output).with_context(|| format!("writing {}", output.display()))?;
+    if let Some(p) = png {
+        ensure_parent(p)?;
+        film::png::write_radiance(p, d.width as u32, d.height as u32, &d.radiance, 0.0)?;
+    }
+    if let Some(p) = weights_png {
+        write_weights_png(p, d)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,406 @@
+//! `pixguide train`: trains one denoiser (G, P, both, guided, or a guided ablation) on a
+//! `pixguide dataset` folder with the staged schedule of method.md §3/§6.2; resumable.
+
+use super::progress;
+use crate::alloc_stats;
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use denoiser::method::Method;
+use denoiser::model::DenoiserConfig;
+use denoiser::train::data::{Dataset, LoadOptions};
+use denoiser::train::patches::Sampling;
+use denoiser::train::schedule::{self, Ablation, ScheduleOptions};
+use denoiser::train::{self as tr, Event, TrainOptions};
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(Args, Clone)]
+pub struct TrainArgs {
+    /// Dataset folder written by `pixguide dataset` (shots.jsonl, train/, val/).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// g, p, both or guided.
+    #[arg(long, default_value = "g")]
+    pub method: String,
+    /// Guided ablation: full-n-full (from scratch), fix-n-train (only E trains),
+    /// radiance-only (E sees only I_G, I_P).
+    #[arg(long)]
+    pub ablation: Option<String>,
+    /// Trained G model (weights file) the guided model starts from.
+    #[arg(long)]
+    pub from_g: Option<PathBuf>,
+    /// Trained P model the guided model starts from.
+    #[arg(long)]
+    pub from_p: Option<PathBuf>,
+    /// Network sizes: default (CPU), half or paper.
+    #[arg(long, default_value = "default")]
+    pub preset: String,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output weights (safetensors). A log `<output>.log.jsonl` is written next to it.
+    #[arg(short, long, required_unless_present = "all")]
+    pub output: Option<PathBuf>,
+    /// Train the whole comparison in sequence into --out-dir: g, p, both, guided, fix-n-train,
+    /// radiance-only, full-n-full, then g/p/guided at the half preset. Finished models are
+    /// skipped, so rerunning continues; --minutes is then the budget of the whole plan.
+    #[arg(long, conflicts_with_all = ["output", "method", "ablation", "from_g", "from_p", "preset"])]
+    pub all: bool,
+    /// Multiply every step count of the --all plan (e.g. 0.01 for a smoke test).
+    #[arg(long, default_value_t = 1.0)]
+    pub all_scale: f64,
+    /// Folder of the --all weights (`<variant>-<preset>.safetensors`).
+    #[arg(long, default_value = "denoiser/weights")]
+    pub out_dir: PathBuf,
+    /// Checkpoint folder (default `<output>.ckpt`).
+    #[arg(long)]
+    pub checkpoint_dir: Option<PathBuf>,
+    /// Continue from the checkpoint folder if it holds a run with the same options.
+    #[arg(long)]
+    pub resume: bool,
+    /// Input patch side in pixels (the output is smaller by twice the model margin).
+    #[arg(long, default_value_t = 64)]
+    pub patch: usize,
+    #[arg(long, default_value_t = 4)]
+    pub batch: usize,
+    /// Sample counts to train on (default: every noisy_<S>spp.exr of the dataset).
+    #[arg(long, value_delimiter = ',')]
+    pub spp: Vec<usize>,
+    /// Patch corners: importance (method.md §7.2 map) or uniform.
+    #[arg(long, default_value = "importance")]
+    pub sampling: String,
+    /// Steps of the per-branch stage (G, P, both).
+    #[arg(long)]
+    pub branch_steps: Option<usize>,
+    /// Steps of the total-radiance finetune stage (G, P, both).
+    #[arg(long)]
+    pub finetune_steps: Option<usize>,
+    /// Steps of the joint stage (guided, fix-n-train, radiance-only).
+    #[arg(long)]
+    pub joint_steps: Option<usize>,
+    /// Steps of full-n-full (guided from scratch).
+    #[arg(long)]
+    pub scratch_steps: Option<usize>,
+    #[arg(long)]
+    pub lr_branches: Option<f64>,
+    #[arg(long)]
+    pub lr_finetune: Option<f64>,
+    /// Learning rate of E in the joint stage.
+    #[arg(long)]
+    pub lr_joint_e: Option<f64>,
+    /// Learning rate of D_G, D_P and the PathNets in the joint stage.
+    #[arg(long)]
+    pub lr_joint_rest: Option<f64>,
+    #[arg(long)]
+    pub lr_scratch: Option<f64>,
+    /// Validate every N steps (0 = once per epoch).
+    #[arg(long, default_value_t = 0)]
+    pub val_every: usize,
+    /// Stop a stage after this many validations without improvement.
+    #[arg(long)]
+    pub patience: Option<usize>,
+    #[arg(long, default_value_t = 100)]
+    pub checkpoint_every: usize,
+    /// Wall-clock budget of this run in minutes (split over the stages by their steps).
+    #[arg(long)]
+    pub minutes: Option<f64>,
+    /// End this session after N steps with a checkpoint (continue later with --resume).
+    #[arg(long)]
+    pub stop_after: Option<usize>,
+    /// Use at most this many training shots.
+    #[arg(long)]
+    pub max_train_shots: Option<usize>,
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+fn schedule_options(a: &TrainArgs) -> ScheduleOptions {
+    let mut o = ScheduleOptions::default();
+    let set = |dst: &mut usize, v: Option<usize>| {
+        if let Some(v) = v {
+            *dst = v
+        }
+    };
+    set(&mut o.branch_steps, a.branch_steps);
+    set(&mut o.finetune_steps, a.finetune_steps);
+    set(&mut o.joint_steps, a.joint_steps);
+    set(&mut o.scratch_steps, a.scratch_steps);
+    let setf = |dst: &mut f64, v: Option<f64>| {
+        if let Some(v) = v {
+            *dst = v
+        }
+    };
+    setf(&mut o.lr_branches, a.lr_branches);
+    setf(&mut o.lr_finetune, a.lr_finetune);
+    setf(&mut o.lr_joint_e, a.lr_joint_e);
+    setf(&mut o.lr_joint_rest, a.lr_joint_rest);
+    setf(&mut o.lr_scratch, a.lr_scratch);
+    o
+}
+
+/// One run of the --all plan: variant, method, ablation, preset, its stage lengths
+/// (branch, finetune, joint-or-scratch steps) and the estimated seconds per step on this
+/// machine without other load (docs/training.md), which sets its share of a --minutes budget.
+struct PlanItem {
+    name: &'static str,
+    method: &'static str,
+    ablation: Option<&'static str>,
+    preset: &'static str,
+    steps: [usize; 3],
+    secs_per_step: f64,
+}
+
+const fn item(name: &'static str, method: &'static str, ablation: Option<&'static str>, preset: &'static str, steps: [usize; 3], secs_per_step: f64) -> PlanItem {
+    PlanItem { name, method, ablation, preset, steps, secs_per_step }
+}
+
+/// Proposed for ≤ 2.5 h on this 2-core machine (docs/training.md).
+const PLAN: [PlanItem; 10] = [
+    item("g", "g", None, "default", [1500, 200, 0], 0.52),
+    item("p", "p", None, "default", [800, 100, 0], 1.6),
+    item("both", "both", None, "default", [800, 100, 0], 1.6),
+    item("guided", "guided", None, "default", [0, 0, 400], 2.43),
+    item("fix-n-train", "guided", Some("fix-n-train"), "default", [0, 0, 500], 0.56),
+    item("radiance-only", "guided", Some("radiance-only"), "default", [0, 0, 400], 2.15),
+    item("full-n-full", "guided", Some("full-n-full"), "default", [0, 0, 400], 2.43),
+    item("g", "g", None, "half", [400, 50, 0], 0.74),
+    item("p", "p", None, "half", [300, 50, 0], 2.3),
+    item("guided", "guided", None, "half", [0, 0, 150], 3.2),
+];
+
+fn run_all(a: TrainArgs) -> Result<()> {
+    let scaled = |n: usize| if n == 0 { 0 } else { ((n as f64 * a.all_scale).round() as usize).max(1) };
+    let steps = |it: &PlanItem| -> usize { it.steps.iter().map(|&n| scaled(n)).sum() };
+    let weight: Vec<f64> = PLAN.iter().map(|it| it.secs_per_step * steps(it) as f64).collect();
+    println!("plan: {} runs, {:.0} steps, estimated {:.0} min without other load", PLAN.len(), PLAN.iter().map(|it| steps(it) as f64).sum::<f64>(), weight.iter().sum::<f64>() / 60.0);
+    let path = |name: &str, preset: &str| a.out_dir.join(format!("{name}-{preset}.safetensors"));
+    let start = Instant::now();
+    for (k, it) in PLAN.iter().enumerate() {
+        let out = path(it.name, it.preset);
+        if out.exists() {
+            println!("[{}/{}] {} exists, skipped", k + 1, PLAN.len(), out.display());
+            continue;
+        }
+        let mut r = a.clone();
+        r.all = false;
+        r.output = Some(out);
+        r.method = it.method.to_string();
+        r.ablation = it.ablation.map(str::to_string);
+        r.preset = it.preset.to_string();
+        r.checkpoint_dir = None;
+        let [b, f, j] = it.steps.map(scaled);
+        r.branch_steps = Some(b);
+        r.finetune_steps = Some(f);
+        r.joint_steps = Some(j);
+        r.scratch_steps = Some(j);
+        r.resume = true;
+        if Method::parse(it.method) == Some(Method::Guided) && it.ablation != Some("full-n-full") {
+            r.from_g = Some(path("g", it.preset));
+            r.from_p = Some(path("p", it.preset));
+        }
+        // Each run's share of the whole budget, in proportion to its expected cost; whatever
+        // earlier runs left unused goes to the later ones.
+        if let Some(total) = a.minutes {
+            let left = total - start.elapsed().as_secs_f64() / 60.0;
+            let share: f64 = weight[k] / weight[k..].iter().sum::<f64>();
+            r.minutes = Some((left * share).max(0.5));
+        }
+        println!("[{}/{}] {} ({}){}", k + 1, PLAN.len(), it.name, it.preset, r.minutes.map(|m| format!(", budget {m:.1} min")).unwrap_or_default());
+        run(r)?;
+    }
+    println!("plan done in {:.1} min", start.elapsed().as_secs_f64() / 60.0);
+    Ok(())
+}
+
+pub fn run(a: TrainArgs) -> Result<()> {
+    if a.all {
+        return run_all(a);
+    }
+    let output = a.output.clone().context("--output is required")?;
+    let mut method = Method::parse(&a.method).with_context(|| format!("--method {}: expected g, p, both or guided", a.method))?;
+    let ablation = match &a.ablation {
+        None => None,
+        Some(s) => Some(Ablation::parse(s).with_context(|| format!("--ablation {s}: expected full-n-full, fix-n-train or radiance-only"))?),
+    };
+    if ablation.is_some() {
+        if method != Method::Guided && a.method != "g" {
+            bail!("--ablation applies to the guided method");
+        }
+        method = Method::Guided;
+    }
+    let config = DenoiserConfig::preset(&a.preset).with_context(|| format!("--preset {}: expected default, half or paper", a.preset))?;
+    let sampling = Sampling::parse(&a.sampling).with_context(|| format!("--sampling {}: expected importance or uniform", a.sampling))?;
+    let stages = schedule::plan(method, ablation, &schedule_options(&a));
+    let name = match ablation {
+        Some(ab) => ab.name().to_string(),
+        None => method.name().to_string(),
+    };
+    let command: Vec<String> = std::env::args().collect();
+    let mut metadata = BTreeMap::new();
+    metadata.insert("method".to_string(), method.name().to_string());
+    metadata.insert("variant".to_string(), name.clone());
+    metadata.insert("preset".to_string(), a.preset.clone());
+    metadata.insert("config".to_string(), serde_json::to_string(&config)?);
+    metadata.insert("seed".to_string(), a.seed.to_string());
+    metadata.insert("dataset".to_string(), a.data.display().to_string());
+    metadata.insert("command".to_string(), command.join(" "));
+    let opts = TrainOptions {
+        method,
+        ablation,
+        config,
+        seed: a.seed,
+        patch: a.patch,
+        batch: a.batch,
+        stages,
+        val_every: a.val_every,
+        val_batch: 8,
+        patience: a.patience,
+        checkpoint_every: a.checkpoint_every,
+        minutes: a.minutes,
+        pause_after: a.stop_after,
+        metadata: metadata.clone(),
+    };
+
+    let device = denoiser::cpu_training_device();
+    let model = tr::initial_model(&opts, a.from_g.as_deref(), a.from_p.as_deref(), &device)?;
+    let t_load = Instant::now();
+    let heap0 = alloc_stats::current();
+    let load = LoadOptions { spps: a.spp.clone(), descriptors: method.needs_descriptors(), patch: a.patch, sampling, max_train: a.max_train_shots };
+    let lpb = progress::bar(0, "loading shots");
+    if a.quiet {
+        lpb.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let data = Dataset::load(&a.data, &load, &mut |i, n| {
+        lpb.set_length(n as u64);
+        lpb.set_position(i as u64);
+    })?;
+    lpb.finish_and_clear();
+    let data_mib = data.bytes() as f64 / (1 << 20) as f64;
+    eprintln!(
+        "{}: {} train + {} val shots {}×{} at {:?} spp loaded in {:.1} s ({:.0} MiB prepared, heap +{:.0} MiB)",
+        a.data.display(),
+        data.train.len(),
+        data.val.len(),
+        data.width,
+        data.height,
+        data.spps,
+        t_load.elapsed().as_secs_f64(),
+        data_mib,
+        (alloc_stats::current().saturating_sub(heap0)) as f64 / (1 << 20) as f64
+    );
+
+    let ckpt = a.checkpoint_dir.clone().unwrap_or_else(|| tr::default_checkpoint_dir(&output));
+    if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let log_path = {
+        let mut s = output.as_os_str().to_owned();
+        s.push(".log.jsonl");
+        PathBuf::from(s)
+    };
+    let mut log = std::fs::OpenOptions::new().create(true).append(true).open(&log_path).with_context(|| format!("opening {}", log_path.display()))?;
+    let total: usize = opts.stages.iter().map(|s| s.steps).sum();
+    let pb = progress::bar(total as u64, &format!("train {name}"));
+    pb.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} {prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} {msg} ETA {eta}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    pb.set_prefix(format!("train {name}"));
+    if a.quiet {
+        pb.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let stage_offsets: Vec<usize> = opts.stages.iter().scan(0, |acc, s| {
+        let o = *acc;
+        *acc += s.steps;
+        Some(o)
+    }).collect();
+    let heap_peak0 = alloc_stats::reset_peak();
+    let (mut ema, mut rate, mut last_val) = (None::<f64>, None::<f64>, None::<f64>);
+    let mut stage_time: Vec<(f64, usize)> = vec![(0.0, 0); opts.stages.len()];
+    let mut log_err = None;
+    let mut on_event = |e: Event| {
+        let line = match &e {
+            Event::StageStart { index, stage, from_step, steps_per_epoch } => {
+                pb.set_position((stage_offsets[*index] + from_step) as u64);
+                format!("{{\"event\":\"stage\",\"stage\":{index},\"kind\":\"{}\",\"steps\":{},\"from_step\":{from_step},\"steps_per_epoch\":{steps_per_epoch},\"lr_rest\":{},\"lr_e\":{}}}", stage.kind.name(), stage.steps, json_opt(stage.lr_rest), json_opt(stage.lr_e))
+            }
+            Event::Step { stage, step, steps: _, loss, seconds, patches } => {
+                ema = Some(ema.map_or(*loss, |m| 0.95 * m + 0.05 * loss));
+                let r = *patches as f64 / seconds.max(1e-9);
+                rate = Some(rate.map_or(r, |m| 0.9 * m + 0.1 * r));
+                stage_time[*stage].0 += seconds;
+                stage_time[*stage].1 += 1;
+                pb.set_position((stage_offsets[*stage] + step) as u64);
+                pb.set_message(format!(
+                    "{} loss {:.4} {:.2} patch/s{}",
+                    opts.stages[*stage].kind.name(),
+                    ema.unwrap(),
+                    rate.unwrap(),
+                    last_val.map(|v| format!(" val {v:.4}")).unwrap_or_default()
+                ));
+                format!("{{\"event\":\"step\",\"stage\":{stage},\"step\":{step},\"loss\":{},\"seconds\":{seconds:.4}}}", json_f(*loss))
+            }
+            Event::Validation { stage, step, total_step, rel_mse, best } => {
+                last_val = Some(*rel_mse);
+                format!("{{\"event\":\"val\",\"stage\":{stage},\"step\":{step},\"total_step\":{total_step},\"rel_mse\":{},\"best\":{best}}}", json_f(*rel_mse))
+            }
+            Event::Checkpoint { path } => format!("{{\"event\":\"checkpoint\",\"dir\":{:?}}}", path.display().to_string()),
+            Event::StageEnd { index, steps, reason } => {
+                if *reason != "steps done" {
+                    pb.println(format!("stage {index} ({}) ended at step {steps}: {reason}", opts.stages[*index].kind.name()));
+                }
+                format!("{{\"event\":\"stage_end\",\"stage\":{index},\"steps\":{steps},\"reason\":\"{reason}\"}}")
+            }
+        };
+        if let Err(err) = writeln!(log, "{line}") {
+            log_err.get_or_insert(err);
+        }
+    };
+    let outcome = tr::run(&data, &opts, model, Some(&ckpt), a.resume, &mut on_event)?;
+    pb.finish_and_clear();
+    if outcome.paused {
+        println!("stopped after {} steps as asked; checkpoint in {} (continue with --resume)", outcome.total_steps, ckpt.display());
+        return Ok(());
+    }
+    if let Some(e) = log_err {
+        eprintln!("warning: could not write {}: {e}", log_path.display());
+    }
+    let peak = alloc_stats::peak().saturating_sub(heap_peak0);
+    metadata.insert("steps".to_string(), outcome.total_steps.to_string());
+    metadata.insert("wall_seconds".to_string(), format!("{:.1}", outcome.seconds));
+    metadata.insert("val_rel_mse".to_string(), outcome.best_val.map(|v| format!("{v:.6}")).unwrap_or_else(|| "none".into()));
+    metadata.insert("stages".to_string(), serde_json::to_string(&opts.stages)?);
+    denoiser::train::checkpoint::save_weights(&output, &outcome.model, &metadata)?;
+    let per_stage: Vec<String> = opts
+        .stages
+        .iter()
+        .zip(&stage_time)
+        .filter(|(_, t)| t.1 > 0)
+        .map(|(s, t)| format!("{} {:.2} s/step", s.kind.name(), t.0 / t.1 as f64))
+        .collect();
+    println!(
+        "trained {name} ({}): {} steps in {:.1} min [{}], best val relMSE {}, train heap peak {:.0} MiB (+{data_mib:.0} MiB data); weights {}, log {}",
+        a.preset,
+        outcome.total_steps,
+        outcome.seconds / 60.0,
+        per_stage.join(", "),
+        outcome.best_val.map(|v| format!("{v:.5}")).unwrap_or_else(|| "n/a (no val shots)".into()),
+        peak as f64 / (1 << 20) as f64,
+        output.display(),
+        log_path.display()
+    );
+    Ok(())
+}
+
+fn json_f(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v}")
+    } else {
+        "null".into()
+    }
+}
+
+fn json_opt(v: Option<f64>) -> String {
+    v.map(json_f).unwrap_or_else(|| "null".into())
+}

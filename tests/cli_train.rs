@@ -1,0 +1,72 @@
+//! End-to-end: `pixguide train` on a tiny generated dataset trains G and P, then the guided
+//! model from them; a stopped-and-resumed run ends with the same weights as a straight one.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn pixguide(args: &[&str]) -> String {
+    let o = Command::new(env!("CARGO_BIN_EXE_pixguide")).args(args).current_dir(env!("CARGO_MANIFEST_DIR")).output().unwrap();
+    assert!(o.status.success(), "{args:?} failed: {}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Tensor bytes of a safetensors file (the metadata holds wall times, so files differ).
+fn tensors(path: &Path) -> Vec<(String, Vec<u8>)> {
+    let bytes = std::fs::read(path).unwrap();
+    let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + n]).unwrap();
+    let mut out: Vec<(String, Vec<u8>)> = header
+        .as_object()
+        .unwrap()
+        .iter()
+        .filter(|(k, _)| *k != "__metadata__")
+        .map(|(k, v)| {
+            let o = &v["data_offsets"];
+            let (a, b) = (o[0].as_u64().unwrap() as usize, o[1].as_u64().unwrap() as usize);
+            (k.clone(), bytes[8 + n + a..8 + n + b].to_vec())
+        })
+        .collect();
+    out.sort();
+    out
+}
+
+#[test]
+fn train_g_p_guided_and_resume() {
+    let base = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("train");
+    std::fs::remove_dir_all(&base).ok();
+    let data = base.join("data");
+    let d = data.to_str().unwrap();
+    pixguide(&["dataset", "--scenes", "scenes/cornell-box/scene.toml", "--shots", "2", "--spp", "2,4", "--ref-spp", "8", "--size", "32x32", "--quiet", "-o", d]);
+    let out = |n: &str| base.join(n).to_str().unwrap().to_string();
+    let common = ["--data", d, "--patch", "24", "--batch", "2", "--branch-steps", "2", "--finetune-steps", "1", "--joint-steps", "2", "--val-every", "1", "--quiet"];
+    let train = |extra: &[&str]| {
+        let mut a = vec!["train"];
+        a.extend_from_slice(&common);
+        a.extend_from_slice(extra);
+        pixguide(&a)
+    };
+    let g = train(&["--method", "g", "-o", &out("g.safetensors")]);
+    assert!(g.starts_with("trained g (default): 3 steps"), "{g}");
+    train(&["--method", "p", "-o", &out("p.safetensors")]);
+    let guided = train(&["--method", "guided", "--from-g", &out("g.safetensors"), "--from-p", &out("p.safetensors"), "-o", &out("guided.safetensors")]);
+    assert!(guided.starts_with("trained guided (default): 2 steps"), "{guided}");
+    // The guided model holds D_G from G and D_P + PathNet from P, plus E.
+    let names: Vec<String> = tensors(&base.join("guided.safetensors")).into_iter().map(|t| t.0).collect();
+    for prefix in ["diffuse.d_g.", "diffuse.d_p.", "diffuse.path.", "diffuse.e.", "specular.e."] {
+        assert!(names.iter().any(|n| n.starts_with(prefix)), "no {prefix}* tensor");
+    }
+    // Log: one line per step and per validation, valid JSON with finite numbers.
+    let log = std::fs::read_to_string(base.join("g.safetensors.log.jsonl")).unwrap();
+    let events: Vec<serde_json::Value> = log.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(events.iter().filter(|e| e["event"] == "step").count(), 3);
+    assert!(events.iter().filter(|e| e["event"] == "val").all(|e| e["rel_mse"].as_f64().is_some_and(f64::is_finite)));
+    // Guided without its pretrained models is a clear error, not a crash.
+    let o = Command::new(env!("CARGO_BIN_EXE_pixguide")).args(["train", "--data", d, "--method", "guided", "--patch", "24", "-o", &out("x.safetensors"), "--quiet"]).output().unwrap();
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--from-g"));
+    // Stop after 2 steps, resume: same tensors as the straight G run above.
+    let stopped = train(&["--method", "g", "-o", &out("g2.safetensors"), "--stop-after", "2"]);
+    assert!(stopped.starts_with("stopped after 2 steps"), "{stopped}");
+    assert!(!base.join("g2.safetensors").exists());
+    train(&["--method", "g", "-o", &out("g2.safetensors"), "--resume"]);
+    assert_eq!(tensors(&base.join("g2.safetensors")), tensors(&base.join("g.safetensors")));
+}
