@@ -39,8 +39,8 @@ pub const MAX_RADIANCE: f32 = 1e18;
 
 #[derive(Clone, Debug)]
 pub struct InferOptions {
-    /// Output block per window (pixels, square). Larger tiles waste less on context but need
-    /// more memory; see docs/denoiser-design.md for measured figures.
+    /// Output block per window (pixels, square); 0 = [`auto_tile`]. Larger tiles waste less on
+    /// context but need more memory; see docs/denoiser-design.md for measured figures.
     pub tile: usize,
     /// Windows per forward pass.
     pub batch: usize,
@@ -48,7 +48,7 @@ pub struct InferOptions {
 
 impl Default for InferOptions {
     fn default() -> Self {
-        InferOptions { tile: 128, batch: 2 }
+        InferOptions { tile: 0, batch: 1 }
     }
 }
 
@@ -72,6 +72,8 @@ pub struct BranchMaps {
 
 #[derive(Clone, Debug, Default)]
 pub struct Timings {
+    /// Output tile side used.
+    pub tile: usize,
     /// Cutting windows out of the prepared image and building tensors.
     pub gather_s: f64,
     /// Network forward passes (including reading results back).
@@ -129,6 +131,29 @@ pub fn alignment(config: &DenoiserConfig, method: Method) -> usize {
     } else {
         1
     }
+}
+
+/// Window side for an output tile of side `tile`.
+pub fn window_side(config: &DenoiserConfig, method: Method, tile: usize) -> usize {
+    let a = alignment(config, method);
+    align_up(tile + 2 * context(config, method) + a - 1, a)
+}
+
+/// Per-sample activations of one window (samples × window pixels) allowed by [`auto_tile`]: the
+/// cost of a 256-pixel tile of the default guided model at 8 spp, measured at ≈ 0.4 GiB of heap
+/// (docs/denoiser-design.md).
+pub const AUTO_SAMPLE_PIXELS: usize = 8 * 344 * 344;
+
+/// The largest of 256, 192, 128, 96, 64 whose window keeps the path-manifold module's
+/// per-sample activations within [`AUTO_SAMPLE_PIXELS`] at `spp` (models without it: 256). Large
+/// tiles waste less work on context (a 128 tile of the default guided model computes a 216²
+/// window, 2.8× its output; a 256 tile 1.8×).
+pub fn auto_tile(config: &DenoiserConfig, method: Method, spp: usize) -> usize {
+    let s = if method.needs_descriptors() { spp.max(1) } else { 1 };
+    [256, 192, 128, 96, 64]
+        .into_iter()
+        .find(|&t| s * window_side(config, method, t).pow(2) <= AUTO_SAMPLE_PIXELS)
+        .unwrap_or(64)
 }
 
 /// Mirror index into 0..n for any integer (period 2n−2).
@@ -215,8 +240,8 @@ pub fn denoise(
     let a = alignment(config, method);
     // Padded image: m on the left/top, m plus alignment slack on the right/bottom.
     let (pw, ph) = (align_up(w + 2 * m, a), align_up(h + 2 * m, a));
-    let tile = opts.tile.max(1);
-    let win = align_up(tile + 2 * c + a - 1, a);
+    let tile = if opts.tile == 0 { auto_tile(config, method, image.spp) } else { opts.tile };
+    let win = window_side(config, method, tile);
     let (ww, wh) = (win.min(pw), win.min(ph));
     // Window origin for the block starting at output coordinate t (padded coordinate t + m).
     let origin = |t: usize, size: usize, padded: usize| -> usize {
@@ -234,7 +259,7 @@ pub fn denoise(
     let guided = method == Method::Guided;
     let mut wd = if guided { vec![0.0f32; w * h] } else { Vec::new() };
     let mut ws = wd.clone();
-    let mut timings = Timings { windows: blocks.len(), window: ww.max(wh), ..Default::default() };
+    let mut timings = Timings { tile, windows: blocks.len(), window: ww.max(wh), ..Default::default() };
     for chunk in blocks.chunks(opts.batch.max(1)) {
         let tg = Instant::now();
         let origins: Vec<(usize, usize)> =
@@ -430,6 +455,21 @@ mod tests {
             let wg = out.weights_g.unwrap();
             assert!(wg.diffuse.iter().chain(&wg.specular).all(|x| (0.0..=1.0).contains(x)));
         }
+    }
+
+    /// The automatic tile keeps 256 where the budget allows and shrinks as spp grows for models
+    /// with per-sample inputs; the default guided model's context is what the docs state.
+    #[test]
+    fn auto_tile_follows_spp() {
+        let c = DenoiserConfig::cpu_default();
+        assert_eq!(context(&c, Method::G), 7);
+        assert_eq!(context(&c, Method::Guided), 7 + 29 + 5);
+        assert_eq!(window_side(&c, Method::Guided, 256), 344);
+        assert_eq!(auto_tile(&c, Method::Guided, 8), 256);
+        assert_eq!(auto_tile(&c, Method::G, 64), 256);
+        let t32 = auto_tile(&c, Method::Guided, 32);
+        assert!(t32 < 256 && t32 >= auto_tile(&c, Method::Guided, 64), "{t32}");
+        assert!(32 * window_side(&c, Method::Guided, t32).pow(2) <= AUTO_SAMPLE_PIXELS);
     }
 
     #[test]

@@ -105,7 +105,15 @@ pub fn save(
         .metadata(keys::METHOD, method.name())
         .metadata(keys::PRESET, preset)
         .metadata(keys::PROVENANCE, provenance_json);
-    model.save_into(&mut store).map_err(|e| err(e.to_string()))
+    model.save_into(&mut store).map_err(|e| err(e.to_string()))?;
+    // The atomic write goes through a private temporary file (mode 0600); weights are meant to
+    // be shared.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o644)).ok();
+    }
+    Ok(())
 }
 
 /// Reads only the metadata of a weight file (cheap: the header).

@@ -47,17 +47,18 @@ pub struct DenoiseArgs {
 /// Options shared with `render --denoise`.
 #[derive(Args, Clone)]
 pub struct InferArgs {
-    /// Output tile side of tiled inference (pixels); memory grows with its square.
-    #[arg(long, default_value_t = 128)]
+    /// Output tile side of tiled inference (pixels); memory grows with its square. 0 = automatic
+    /// (256, smaller at high spp for models that read per-sample descriptors).
+    #[arg(long, default_value_t = 0)]
     pub tile: usize,
     /// Tiles per network pass.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 1)]
     pub batch: usize,
 }
 
 impl InferArgs {
     pub fn options(&self) -> InferOptions {
-        InferOptions { tile: self.tile.max(8), batch: self.batch.max(1) }
+        InferOptions { tile: if self.tile == 0 { 0 } else { self.tile.max(8) }, batch: self.batch.max(1) }
     }
 }
 
@@ -206,7 +207,7 @@ pub fn error_line(label: &str, rgb: &[f32], reference: &Frame) -> String {
 pub fn print_denoise_summary(loaded: &Loaded, run: &DenoiseRun) {
     let t = &run.denoised.timings;
     println!(
-        "denoise ({} model, preset {}): {:.2} s = preprocess {:.2} s + networks {:.2} s + tiling {:.2} s; {} windows of {}², peak heap +{:.0} MiB",
+        "denoise ({} model, preset {}): {:.2} s = preprocess {:.2} s + networks {:.2} s + tiling {:.2} s; {} tiles of {}² in windows of {}², peak heap +{:.0} MiB",
         loaded.method,
         if loaded.preset.is_empty() { "?" } else { &loaded.preset },
         run.prepare_s + t.total_s,
@@ -214,6 +215,7 @@ pub fn print_denoise_summary(loaded: &Loaded, run: &DenoiseRun) {
         t.forward_s,
         t.gather_s,
         t.windows,
+        t.tile,
         t.window,
         run.peak_extra_bytes as f64 / (1024.0 * 1024.0)
     );
