@@ -11,6 +11,7 @@ use denoiser::train::data::{Dataset, LoadOptions};
 use denoiser::train::patches::Sampling;
 use denoiser::train::schedule::{self, Ablation, ScheduleOptions};
 use denoiser::train::{self as tr, Event, TrainOptions};
+use denoiser::weights::{self, Provenance};
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::PathBuf;
@@ -371,7 +372,27 @@ pub fn run(a: TrainArgs) -> Result<()> {
     metadata.insert("wall_seconds".to_string(), format!("{:.1}", outcome.seconds));
     metadata.insert("val_rel_mse".to_string(), outcome.best_val.map(|v| format!("{v:.6}")).unwrap_or_else(|| "none".into()));
     metadata.insert("stages".to_string(), serde_json::to_string(&opts.stages)?);
-    denoiser::train::checkpoint::save_weights(&output, &outcome.model, &metadata)?;
+    let provenance = Provenance {
+        command: command.join(" "),
+        seed: a.seed,
+        dataset: a.data.display().to_string(),
+        wall_time_s: outcome.seconds,
+        validation_rel_mse: outcome.best_val.unwrap_or(f64::NAN),
+        steps: outcome.total_steps as u64,
+        git_commit: git_commit(),
+        date: iso_date_utc(),
+        notes: format!(
+            "variant {name}; stages {}; patch {}, batch {}, spp {:?}, sampling {}; {} train + {} val shots",
+            serde_json::to_string(&opts.stages)?,
+            a.patch,
+            a.batch,
+            data.spps,
+            a.sampling,
+            data.train.len(),
+            data.val.len()
+        ),
+    };
+    weights::save(&output, &outcome.model, &tr::effective_config(&opts), &a.preset, &provenance)?;
     let per_stage: Vec<String> = opts
         .stages
         .iter()
@@ -391,6 +412,34 @@ pub fn run(a: TrainArgs) -> Result<()> {
         log_path.display()
     );
     Ok(())
+}
+
+/// `git rev-parse HEAD` (+ "-dirty" with local changes), empty outside a repository.
+fn git_commit() -> String {
+    let run = |args: &[&str]| std::process::Command::new("git").args(args).output().ok().filter(|o| o.status.success()).map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
+    match run(&["rev-parse", "HEAD"]) {
+        Some(h) => {
+            let dirty = run(&["status", "--porcelain", "--untracked-files=no"]).is_some_and(|s| !s.is_empty());
+            if dirty { format!("{h}-dirty") } else { h }
+        }
+        None => String::new(),
+    }
+}
+
+/// Now as ISO 8601 UTC (civil-from-days, Howard Hinnant's algorithm).
+fn iso_date_utc() -> String {
+    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs() as i64).unwrap_or(0);
+    let (days, rem) = (secs.div_euclid(86400), secs.rem_euclid(86400));
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + if m <= 2 { 1 } else { 0 };
+    format!("{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z", rem / 3600, rem / 60 % 60, rem % 60)
 }
 
 fn json_f(v: f64) -> String {

@@ -112,14 +112,39 @@ pub struct Outcome {
     pub paused: bool,
 }
 
-/// The fresh or pretrained model a run starts from. Guided models (except Full-N-Full) take
-/// D_G from the G model and D_P + PathNet from the P model of each branch; E starts fresh.
-pub fn initial_model(opts: &TrainOptions, from_g: Option<&Path>, from_p: Option<&Path>, device: &Device) -> Result<MethodModel, TrainError> {
+/// The network sizes of a run: the preset with the run's seed, and E's radiance-only flag for
+/// that ablation. Weight files must be saved with this config.
+pub fn effective_config(opts: &TrainOptions) -> DenoiserConfig {
     let mut cfg = opts.config.clone();
     cfg.seed = opts.seed;
     if opts.ablation == Some(Ablation::RadianceOnly) {
         cfg.ensemble.radiance_only = true;
     }
+    cfg
+}
+
+/// Loads a pretrained G or P model (a `crate::weights` file) for the guided model, checking
+/// that its method and its network sizes are the ones this run needs.
+fn load_pretrained(path: &Path, want: Method, cfg: &DenoiserConfig, device: &Device) -> Result<MethodModel, TrainError> {
+    let l = crate::weights::load(path, device).map_err(|e| TrainError::Options(e.to_string()))?;
+    if l.method != want {
+        return Err(TrainError::Options(format!("{}: holds a {} model, expected {want}", path.display(), l.method)));
+    }
+    let sizes = |c: &DenoiserConfig| (serde_json::to_string(&c.kpcn).unwrap_or_default(), serde_json::to_string(&c.pathnet).unwrap_or_default());
+    if sizes(&l.config) != sizes(cfg) {
+        return Err(TrainError::Options(format!(
+            "{}: trained with other network sizes (preset `{}`) than this run's; pass the matching --preset",
+            path.display(),
+            l.preset
+        )));
+    }
+    Ok(l.model)
+}
+
+/// The fresh or pretrained model a run starts from. Guided models (except Full-N-Full) take
+/// D_G from the G model and D_P + PathNet from the P model of each branch; E starts fresh.
+pub fn initial_model(opts: &TrainOptions, from_g: Option<&Path>, from_p: Option<&Path>, device: &Device) -> Result<MethodModel, TrainError> {
+    let cfg = effective_config(opts);
     if opts.ablation.is_some() && opts.method != Method::Guided {
         return Err(TrainError::Options(format!("ablations apply to the guided method, not {}", opts.method)));
     }
@@ -128,8 +153,8 @@ pub fn initial_model(opts: &TrainOptions, from_g: Option<&Path>, from_p: Option<
         let (Some(g), Some(p)) = (from_g, from_p) else {
             return Err(TrainError::Options("the guided method starts from trained G and P models: give --from-g and --from-p".into()));
         };
-        let (gm, _) = checkpoint::load_weights(g, MethodModel::init(&cfg, Method::G, device), None)?;
-        let (pm, _) = checkpoint::load_weights(p, MethodModel::init(&cfg, Method::P, device), None)?;
+        let gm = load_pretrained(g, Method::G, &cfg, device)?;
+        let pm = load_pretrained(p, Method::P, &cfg, device)?;
         let take = |dst: &mut BranchNets, g: BranchNets, p: BranchNets| {
             dst.d_g = g.d_g;
             dst.d_p = p.d_p;

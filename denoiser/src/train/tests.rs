@@ -256,3 +256,36 @@ fn weights_round_trip_and_mismatch() {
     assert_eq!(meta.get("method").map(String::as_str), Some("g"));
     assert!(checkpoint::load_weights(&path, MethodModel::init(&cfg, Method::P, &dev), None).is_err());
 }
+
+/// Guided from G and P weight files: D_G comes from the G file, D_P and the PathNet from the P
+/// file, and after the joint stage all of them and E have moved (so the loaded networks are
+/// trainable, not frozen by loading). A G file given as --from-p is refused.
+#[test]
+fn guided_starts_from_pretrained_files_and_trains_them() {
+    let data = dataset();
+    let dev = crate::cpu_training_device();
+    let dir = tmpdir("pretrained");
+    let o = options(Method::Guided, None, &short());
+    let cfg = effective_config(&o);
+    let save = |m: Method, seed: u64| {
+        let path = dir.join(format!("{m}.safetensors"));
+        let model = MethodModel::init(&cfg.clone().with_seed(seed), m, &dev);
+        crate::weights::save(&path, &model, &cfg, "tiny", &Default::default()).unwrap();
+        (path, model)
+    };
+    let (gp, g) = save(Method::G, 11);
+    let (pp, p) = save(Method::P, 12);
+    let start = initial_model(&o, Some(&gp), Some(&pp), &dev).unwrap();
+    let vals = |m: &Option<_>| m.as_ref().map(|x: &crate::kpcn::KpcnColumn| checkpoint::parameters(x).into_iter().flat_map(|t| t.3).collect::<Vec<f32>>());
+    assert_eq!(vals(&start.diffuse.d_g), vals(&g.diffuse.d_g));
+    assert_eq!(vals(&start.specular.d_p), vals(&p.specular.d_p));
+    let path_vals = |m: &MethodModel| checkpoint::parameters(m.diffuse.path.as_ref().unwrap()).into_iter().flat_map(|t| t.3).collect::<Vec<f32>>();
+    assert_eq!(path_vals(&start), path_vals(&p));
+    let e0 = checkpoint::parameters(start.diffuse.e.as_ref().unwrap()).into_iter().flat_map(|t| t.3).collect::<Vec<f32>>();
+    let end = run(&data, &o, start, None, false, &mut |_| {}).unwrap().model;
+    assert_ne!(vals(&end.diffuse.d_g), vals(&g.diffuse.d_g));
+    assert_ne!(vals(&end.specular.d_p), vals(&p.specular.d_p));
+    assert_ne!(path_vals(&end), path_vals(&p));
+    assert_ne!(checkpoint::parameters(end.diffuse.e.as_ref().unwrap()).into_iter().flat_map(|t| t.3).collect::<Vec<f32>>(), e0);
+    assert!(matches!(initial_model(&o, Some(&gp), Some(&gp), &dev), Err(TrainError::Options(_))));
+}
