@@ -118,6 +118,7 @@ fn clear_errors() {
     assert!(err.contains("plain.exr") && err.contains("--aovs"), "{err}");
     // A missing weight file, in both commands.
     let missing = d.join("nope.safetensors");
+    std::fs::remove_file(&missing).ok(); // left by an earlier run's garbage-file case below
     let err = failed(&pixguide(&["denoise", s(&plain), "--model", "g", "--weights", s(&missing)]), "missing weights");
     assert!(err.contains("nope.safetensors") && err.contains("does not exist"), "{err}");
     let err = failed(
