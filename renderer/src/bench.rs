@@ -349,7 +349,7 @@ pub fn ray_bench(mesh: &Mesh, sets: &[(&str, &RayBatch)], threads: usize, repeat
 
 impl fmt::Display for RayBenchReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(f, "{} triangles: BVH build {:.1} ms on {} threads ({} CWBVH nodes)", self.triangles, self.build_seconds * 1e3, self.threads, self.bvh_nodes)?;
+        writeln!(f, "{} triangles: BVH build {:.1} ms on {} threads ({} BVH8 nodes)", self.triangles, self.build_seconds * 1e3, self.threads, self.bvh_nodes)?;
         if let Some(b) = self.embree_build_seconds {
             writeln!(f, "  Embree scene build {:.1} ms (embreex default: TBB threads)", b * 1e3)?;
         }
