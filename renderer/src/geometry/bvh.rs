@@ -129,6 +129,11 @@ impl RayData {
     }
 }
 
+const STATS: bool = false;
+pub static CN: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+pub static CB: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+pub fn take_stats() -> (usize, usize) { (CN.swap(0, std::sync::atomic::Ordering::Relaxed), CB.swap(0, std::sync::atomic::Ordering::Relaxed)) }
+
 /// Hit record inside the traversal: t, original triangle index, b1, b2.
 type HitRec = (f32, u32, f32, f32);
 
@@ -219,6 +224,7 @@ impl Bvh {
         loop {
             if cur & LEAF_BIT == 0 {
                 let node = &self.nodes[cur as usize];
+                if STATS { CN.fetch_add(1, std::sync::atomic::Ordering::Relaxed); }
                 let (mask, tnear) = node_test(node, r, tmax);
                 if mask != 0 {
                     let first = mask.trailing_zeros() as usize;
@@ -234,6 +240,9 @@ impl Bvh {
                         let c = m.trailing_zeros() as usize;
                         m &= m - 1;
                         let e = (node.child[c], tnear[c]);
+                        if PREFETCH {
+                            self.prefetch(e.0);
+                        }
                         let mut j = sp;
                         // Insertion sort, descending in t from the bottom of the run.
                         while j > base {
@@ -256,6 +265,7 @@ impl Bvh {
             } else {
                 let first = (cur & ((1 << BLOCK_BITS) - 1)) as usize;
                 let n = ((cur & !LEAF_BIT) >> BLOCK_BITS) as usize + 1;
+                if STATS { CB.fetch_add(n, std::sync::atomic::Ordering::Relaxed); }
                 for blk in &self.blocks[first..first + n] {
                     if let Some(h) = tri4_test(blk, r, tmax) {
                         tmax = h.0;
@@ -278,6 +288,31 @@ impl Bvh {
                     cur = c;
                     break;
                 }
+            }
+        }
+    }
+}
+
+const PREFETCH: bool = true;
+
+impl Bvh {
+    /// Starts loading a stacked subtree's node or leaf block while the nearer one is traversed:
+    /// traversal of a mesh that does not fit in L2 waits mostly on memory, and this overlaps
+    /// the waits.
+    #[inline(always)]
+    fn prefetch(&self, c: u32) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+            let (p, lines) = if c & LEAF_BIT == 0 {
+                (self.nodes.as_ptr().wrapping_add(c as usize) as *const i8, std::mem::size_of::<Node>() / 64)
+            } else {
+                (self.blocks.as_ptr().wrapping_add((c & ((1 << BLOCK_BITS) - 1)) as usize) as *const i8, 2)
+            };
+            for l in 0..lines {
+                // SAFETY: prefetching is a hint and never faults, even for an address outside
+                // the allocation (wrapping_add keeps the pointer arithmetic defined).
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * l)) };
             }
         }
     }
@@ -389,6 +424,8 @@ struct Collapser<'a> {
     valid: &'a [u32],
     /// Triangles under each binary node.
     count: Vec<u32>,
+    /// Whether each binary subtree becomes one leaf (surface area heuristic).
+    leaf: Vec<bool>,
     nodes: Vec<Node>,
     blocks: Vec<Tri4>,
     /// Deepest chain of nodes made by `split_leaf` (extra traversal depth below a leaf).
@@ -409,19 +446,32 @@ impl<'a> Collapser<'a> {
             }
         }
         let mut count = vec![0u32; n2.len()];
+        let mut cost = vec![0f32; n2.len()];
+        let mut leaf = vec![false; n2.len()];
+        let env = |k: &str, d: f32| std::env::var(k).ok().and_then(|s| s.parse().ok()).unwrap_or(d);
+        let (c_node, c_blk, cap) = (env("C_NODE", 1.0), env("C_BLK", 1.0), env("LEAF_CAP", 16.0) as u32);
         for &i in order.iter().rev() {
             let nd = &n2[i as usize];
-            count[i as usize] = if nd.prim_count > 0 {
-                nd.prim_count
+            let area = nd.aabb.half_area();
+            let i = i as usize;
+            if nd.prim_count > 0 {
+                count[i] = nd.prim_count;
+                leaf[i] = true;
+                cost[i] = area * c_blk * nd.prim_count.div_ceil(4) as f32;
             } else {
-                count[nd.first_index as usize] + count[nd.first_index as usize + 1]
-            };
+                let (l, r) = (nd.first_index as usize, nd.first_index as usize + 1);
+                count[i] = count[l] + count[r];
+                let inner = area * c_node + cost[l] + cost[r];
+                let as_leaf = area * c_blk * count[i].div_ceil(4) as f32;
+                leaf[i] = count[i] <= cap && as_leaf <= inner;
+                cost[i] = if leaf[i] { as_leaf } else { inner };
+            }
         }
-        Collapser { bvh2, tris, valid, count, nodes: Vec::new(), blocks: Vec::new(), split_depth: 0 }
+        Collapser { bvh2, tris, valid, count, leaf, nodes: Vec::new(), blocks: Vec::new(), split_depth: 0 }
     }
 
     fn is_leaf(&self, i: u32) -> bool {
-        self.bvh2.nodes[i as usize].prim_count > 0 || self.count[i as usize] <= LEAF_MAX
+        self.leaf[i as usize]
     }
 
     fn run(mut self) -> Bvh {
@@ -467,6 +517,11 @@ impl<'a> Collapser<'a> {
         }
         // Each level pushes at most W − 1 entries, plus one popped-and-refilled slot.
         let stack_need = (max_depth + self.split_depth) * (W - 1) + 1;
+        if std::env::var_os("BVH_STATS").is_some() {
+            let used: usize = self.nodes.iter().map(|n| n.child.iter().filter(|&&c| c != u32::MAX).count()).sum();
+            let leaves: usize = self.nodes.iter().map(|n| n.child.iter().filter(|&&c| c != u32::MAX && c & LEAF_BIT != 0).count()).sum();
+            eprintln!("STATS nodes {} blocks {} tris {} children/node {:.2} leaves {} depth {}", self.nodes.len(), self.blocks.len(), self.tris.len(), used as f64 / self.nodes.len() as f64, leaves, max_depth);
+        }
         Bvh { nodes: self.nodes, blocks: self.blocks, stack_need }
     }
 
