@@ -299,35 +299,30 @@ pub fn ray_bench(mesh: &Mesh, sets: &[(&str, &RayBatch)], threads: usize, repeat
         accel = Some(a);
     }
     let accel = accel.expect("built three times");
-    let best_rate = |p: &rayon::ThreadPool, batch: &RayBatch| {
-        let mut best = 0.0f64;
-        let mut hits = 0usize;
-        for _ in 0..repeats.max(1) {
-            let t0 = Instant::now();
-            let r: Vec<Option<Hit>> = p.install(|| trace(&accel, batch, 0));
-            let s = t0.elapsed().as_secs_f64();
-            hits = r.iter().filter(|h| h.is_some()).count();
-            best = best.max(batch.len() as f64 / s);
-        }
-        (best, hits)
+    let rate = |p: &rayon::ThreadPool, batch: &RayBatch| {
+        let t0 = Instant::now();
+        let r: Vec<Option<Hit>> = p.install(|| trace(&accel, batch, 0));
+        let s = t0.elapsed().as_secs_f64();
+        (batch.len() as f64 / s, r.iter().filter(|h| h.is_some()).count())
     };
     let mut reports = Vec::new();
     let mut embree_build = None;
     for (name, batch) in sets {
-        let (ours_mt, hits) = best_rate(&pool_mt, batch);
-        let (ours_1t, _) = best_rate(&pool_1t, batch);
-        let embree_1t = match embree {
-            Some(e) => {
-                let mut best = 0.0f64;
-                for _ in 0..repeats.max(1) {
-                    let r = embree_trace(&e.python, &e.script, &e.work_dir, mesh, batch, e.robust)?;
-                    best = best.max(batch.len() as f64 / r.query_seconds);
-                    embree_build = Some(embree_build.map_or(r.build_seconds, |b: f64| b.min(r.build_seconds)));
-                }
-                Some(best)
+        // Ours and Embree alternate, run by run, so that both see the same share of whatever
+        // else loads the machine; the best run of each is reported.
+        let (mut ours_mt, mut ours_1t, mut hits) = (0.0f64, 0.0f64, 0);
+        let mut embree_1t: Option<f64> = None;
+        for _ in 0..repeats.max(1) {
+            let (r, h) = rate(&pool_mt, batch);
+            ours_mt = ours_mt.max(r);
+            hits = h;
+            ours_1t = ours_1t.max(rate(&pool_1t, batch).0);
+            if let Some(e) = embree {
+                let r = embree_trace(&e.python, &e.script, &e.work_dir, mesh, batch, e.robust)?;
+                embree_1t = Some(embree_1t.unwrap_or(0.0).max(batch.len() as f64 / r.query_seconds));
+                embree_build = Some(embree_build.map_or(r.build_seconds, |b: f64| b.min(r.build_seconds)));
             }
-            None => None,
-        };
+        }
         reports.push(RaySetReport {
             name: name.to_string(),
             rays: batch.len(),

@@ -51,6 +51,12 @@ const MIN_DIR: f32 = 1e-20;
 
 /// Build parameters, chosen by measurement (`examples/ray_bench.rs` with PIXGUIDE_BENCH_PRESETS).
 pub fn default_build_params() -> BvhBuildParams {
+    match std::env::var("PRESET").as_deref() {
+        Ok("fast") => return BvhBuildParams::fast_build(),
+        Ok("medium") => return BvhBuildParams::medium_build(),
+        Ok("slow") => return BvhBuildParams::slow_build(),
+        _ => {}
+    }
     BvhBuildParams::very_fast_build()
 }
 
@@ -78,6 +84,7 @@ pub struct Bvh {
     blocks: Vec<Tri4>,
     /// Traversal stack entries the deepest path can need.
     stack_need: usize,
+    variant: u32,
 }
 
 /// Per-ray constants of the box and triangle tests.
@@ -143,7 +150,7 @@ impl Bvh {
     pub fn build(tris: Vec<[Vec3; 3]>, valid: Vec<u32>, params: BvhBuildParams) -> Bvh {
         debug_assert_eq!(tris.len(), valid.len());
         if tris.is_empty() {
-            return Bvh { nodes: Vec::new(), blocks: Vec::new(), stack_need: 0 };
+            return Bvh { nodes: Vec::new(), blocks: Vec::new(), stack_need: 0, variant: 0 };
         }
         let obvhs_tris: Vec<Triangle> =
             tris.iter().map(|t| Triangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() }).collect();
@@ -522,7 +529,7 @@ impl<'a> Collapser<'a> {
             let leaves: usize = self.nodes.iter().map(|n| n.child.iter().filter(|&&c| c != u32::MAX && c & LEAF_BIT != 0).count()).sum();
             eprintln!("STATS nodes {} blocks {} tris {} children/node {:.2} leaves {} depth {}", self.nodes.len(), self.blocks.len(), self.tris.len(), used as f64 / self.nodes.len() as f64, leaves, max_depth);
         }
-        Bvh { nodes: self.nodes, blocks: self.blocks, stack_need }
+        Bvh { nodes: self.nodes, blocks: self.blocks, stack_need, variant: std::env::var("VARIANT").ok().and_then(|s| s.parse().ok()).unwrap_or(0) }
     }
 
     /// Leaf reference for the triangles under binary node `i`.
