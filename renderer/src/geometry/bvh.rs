@@ -247,7 +247,7 @@ impl Bvh {
                         let c = m.trailing_zeros() as usize;
                         m &= m - 1;
                         let e = (node.child[c], tnear[c]);
-                        if PREFETCH {
+                        if PREFETCH && self.variant != 1 {
                             self.prefetch(e.0);
                         }
                         let mut j = sp;
