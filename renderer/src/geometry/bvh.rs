@@ -1,8 +1,9 @@
 //! The ray-query BVH: obvhs builds a binary BVH (PLOC, then reinsertion optimisation), which is
 //! collapsed here into an 8-wide BVH of our own layout — float child boxes in
-//! structure-of-arrays form, tested four children at a time — with leaves of up to four
-//! triangles stored side by side and tested together (`Tri4`). Traversal visits children
-//! nearest first and skips any stacked subtree that starts beyond the closest hit found so far.
+//! structure-of-arrays form, tested four children at a time — whose leaves (up to 16 triangles,
+//! chosen by the surface area heuristic) are blocks of four triangles stored side by side and
+//! tested together (`Tri4`). Traversal visits children nearest first, prefetches the ones it
+//! stacks, and skips any stacked subtree that starts beyond the closest hit found so far.
 //!
 //! Why not obvhs's own CWBVH traversal (the previous version, 0.41–0.45× Embree): its node test
 //! dequantises child boxes on every visit, it orders children by ray octant rather than by
@@ -29,8 +30,13 @@ use std::mem::MaybeUninit;
 const W: usize = 8;
 /// Groups of four children per node (one `Vec4` per group and box plane).
 const G: usize = W / 4;
-/// A binary subtree with at most this many triangles becomes one leaf (one `Tri4`).
-const LEAF_MAX: u32 = 4;
+/// Largest leaf the surface-area heuristic may choose (four `Tri4` blocks).
+const LEAF_CAP: u32 = 16;
+/// Surface-area-heuristic cost of a node visit relative to one `Tri4` test. Measured (2026-11-23,
+/// displaced sphere and Cornell box): 0.5 leaves too many small leaves (more node visits, each
+/// a likely cache miss on a 100k-triangle mesh), 2 too few (a Cornell-box ray then tests 5+
+/// blocks); 1 was best or tied on both.
+const C_NODE: f32 = 1.0;
 /// Most `Tri4` blocks in one leaf (the block count has 4 bits in a child reference).
 const LEAF_BLOCKS_MAX: usize = 16;
 /// Child reference: bit 31 set for a leaf, whose bits 27..31 hold the block count − 1 and bits
@@ -49,14 +55,10 @@ const SLAB_WIDEN: f32 = 1.0 / (1 << 20) as f32;
 /// that extend ~1e20 · (distance to the plane) — far beyond any scene.
 const MIN_DIR: f32 = 1e-20;
 
-/// Build parameters, chosen by measurement (`examples/ray_bench.rs` with PIXGUIDE_BENCH_PRESETS).
+/// Build parameters, chosen by measurement: with this BVH, obvhs's presets from
+/// `very_fast_build` to `slow_build` (pre-splits, wider PLOC search, more reinsertion) traced the
+/// displaced sphere within the noise of each other (±10%), and `very_fast_build` builds fastest.
 pub fn default_build_params() -> BvhBuildParams {
-    match std::env::var("PRESET").as_deref() {
-        Ok("fast") => return BvhBuildParams::fast_build(),
-        Ok("medium") => return BvhBuildParams::medium_build(),
-        Ok("slow") => return BvhBuildParams::slow_build(),
-        _ => {}
-    }
     BvhBuildParams::very_fast_build()
 }
 
@@ -84,7 +86,6 @@ pub struct Bvh {
     blocks: Vec<Tri4>,
     /// Traversal stack entries the deepest path can need.
     stack_need: usize,
-    variant: u32,
 }
 
 /// Per-ray constants of the box and triangle tests.
@@ -136,11 +137,6 @@ impl RayData {
     }
 }
 
-const STATS: bool = false;
-pub static CN: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-pub static CB: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-pub fn take_stats() -> (usize, usize) { (CN.swap(0, std::sync::atomic::Ordering::Relaxed), CB.swap(0, std::sync::atomic::Ordering::Relaxed)) }
-
 /// Hit record inside the traversal: t, original triangle index, b1, b2.
 type HitRec = (f32, u32, f32, f32);
 
@@ -150,7 +146,7 @@ impl Bvh {
     pub fn build(tris: Vec<[Vec3; 3]>, valid: Vec<u32>, params: BvhBuildParams) -> Bvh {
         debug_assert_eq!(tris.len(), valid.len());
         if tris.is_empty() {
-            return Bvh { nodes: Vec::new(), blocks: Vec::new(), stack_need: 0, variant: 0 };
+            return Bvh { nodes: Vec::new(), blocks: Vec::new(), stack_need: 0 };
         }
         let obvhs_tris: Vec<Triangle> =
             tris.iter().map(|t| Triangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() }).collect();
@@ -231,7 +227,6 @@ impl Bvh {
         loop {
             if cur & LEAF_BIT == 0 {
                 let node = &self.nodes[cur as usize];
-                if STATS { CN.fetch_add(1, std::sync::atomic::Ordering::Relaxed); }
                 let (mask, tnear) = node_test(node, r, tmax);
                 if mask != 0 {
                     let first = mask.trailing_zeros() as usize;
@@ -247,12 +242,13 @@ impl Bvh {
                         let c = m.trailing_zeros() as usize;
                         m &= m - 1;
                         let e = (node.child[c], tnear[c]);
-                        if PREFETCH && self.variant != 1 {
+                        if PREFETCH {
                             self.prefetch(e.0);
                         }
                         let mut j = sp;
-                        // Insertion sort, descending in t from the bottom of the run.
-                        while j > base {
+                        // Insertion sort, descending in t from the bottom of the run. A shadow
+                        // ray stops at any hit, so order only pays for closest hits.
+                        while !ANY && j > base {
                             // SAFETY: entries base..sp were written in this loop.
                             let prev = unsafe { stack[j - 1].assume_init() };
                             if prev.1 >= e.1 {
@@ -272,7 +268,6 @@ impl Bvh {
             } else {
                 let first = (cur & ((1 << BLOCK_BITS) - 1)) as usize;
                 let n = ((cur & !LEAF_BIT) >> BLOCK_BITS) as usize + 1;
-                if STATS { CB.fetch_add(n, std::sync::atomic::Ordering::Relaxed); }
                 for blk in &self.blocks[first..first + n] {
                     if let Some(h) = tri4_test(blk, r, tmax) {
                         tmax = h.0;
@@ -429,8 +424,6 @@ struct Collapser<'a> {
     bvh2: &'a Bvh2,
     tris: &'a [[Vec3; 3]],
     valid: &'a [u32],
-    /// Triangles under each binary node.
-    count: Vec<u32>,
     /// Whether each binary subtree becomes one leaf (surface area heuristic).
     leaf: Vec<bool>,
     nodes: Vec<Node>,
@@ -455,8 +448,6 @@ impl<'a> Collapser<'a> {
         let mut count = vec![0u32; n2.len()];
         let mut cost = vec![0f32; n2.len()];
         let mut leaf = vec![false; n2.len()];
-        let env = |k: &str, d: f32| std::env::var(k).ok().and_then(|s| s.parse().ok()).unwrap_or(d);
-        let (c_node, c_blk, cap) = (env("C_NODE", 1.0), env("C_BLK", 1.0), env("LEAF_CAP", 16.0) as u32);
         for &i in order.iter().rev() {
             let nd = &n2[i as usize];
             let area = nd.aabb.half_area();
@@ -464,17 +455,17 @@ impl<'a> Collapser<'a> {
             if nd.prim_count > 0 {
                 count[i] = nd.prim_count;
                 leaf[i] = true;
-                cost[i] = area * c_blk * nd.prim_count.div_ceil(4) as f32;
+                cost[i] = area * nd.prim_count.div_ceil(4) as f32;
             } else {
                 let (l, r) = (nd.first_index as usize, nd.first_index as usize + 1);
                 count[i] = count[l] + count[r];
-                let inner = area * c_node + cost[l] + cost[r];
-                let as_leaf = area * c_blk * count[i].div_ceil(4) as f32;
-                leaf[i] = count[i] <= cap && as_leaf <= inner;
+                let inner = area * C_NODE + cost[l] + cost[r];
+                let as_leaf = area * count[i].div_ceil(4) as f32;
+                leaf[i] = count[i] <= LEAF_CAP && as_leaf <= inner;
                 cost[i] = if leaf[i] { as_leaf } else { inner };
             }
         }
-        Collapser { bvh2, tris, valid, count, leaf, nodes: Vec::new(), blocks: Vec::new(), split_depth: 0 }
+        Collapser { bvh2, tris, valid, leaf, nodes: Vec::new(), blocks: Vec::new(), split_depth: 0 }
     }
 
     fn is_leaf(&self, i: u32) -> bool {
@@ -524,12 +515,7 @@ impl<'a> Collapser<'a> {
         }
         // Each level pushes at most W − 1 entries, plus one popped-and-refilled slot.
         let stack_need = (max_depth + self.split_depth) * (W - 1) + 1;
-        if std::env::var_os("BVH_STATS").is_some() {
-            let used: usize = self.nodes.iter().map(|n| n.child.iter().filter(|&&c| c != u32::MAX).count()).sum();
-            let leaves: usize = self.nodes.iter().map(|n| n.child.iter().filter(|&&c| c != u32::MAX && c & LEAF_BIT != 0).count()).sum();
-            eprintln!("STATS nodes {} blocks {} tris {} children/node {:.2} leaves {} depth {}", self.nodes.len(), self.blocks.len(), self.tris.len(), used as f64 / self.nodes.len() as f64, leaves, max_depth);
-        }
-        Bvh { nodes: self.nodes, blocks: self.blocks, stack_need, variant: std::env::var("VARIANT").ok().and_then(|s| s.parse().ok()).unwrap_or(0) }
+        Bvh { nodes: self.nodes, blocks: self.blocks, stack_need }
     }
 
     /// Leaf reference for the triangles under binary node `i`.
@@ -601,4 +587,47 @@ fn set_child(node: &mut Node, slot: usize, aabb: &Aabb, c: u32) {
         node.b[3 + axis][g][l] = aabb.max[axis];
     }
     node.child[slot] = c;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The heap stack (for trees deeper than `STACK` allows) gives the same answers as the
+    /// fixed one, and a mesh of nested triangles at scales 1 … 2^-40 (a deep binary tree)
+    /// still matches the scalar test on every triangle.
+    #[test]
+    fn heap_stack_and_deep_trees_agree_with_brute_force() {
+        let mut tris = Vec::new();
+        for k in 0..400 {
+            let s = 0.5f32.powi(k / 10) * (1.0 + (k % 10) as f32 * 0.05);
+            tris.push([Vec3::new(-s, -s, s * 0.1), Vec3::new(s, -s, s * 0.2), Vec3::new(0.0, s, s * 0.3)]);
+        }
+        let valid: Vec<u32> = (0..tris.len() as u32).collect();
+        let bvh = Bvh::build(tris.clone(), valid, default_build_params());
+        let mut heap = Bvh { nodes: bvh.nodes.clone(), blocks: bvh.blocks.clone(), stack_need: STACK + 1 };
+        heap.stack_need = heap.stack_need.max(bvh.stack_need);
+        let mut rng = crate::rng::Pcg32::new(5, 0);
+        let mut hits = 0;
+        for _ in 0..5000 {
+            let scale = 0.5f32.powi(rng.below(40) as i32);
+            let o = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, 2.0) * scale;
+            let d = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, -2.0).normalize();
+            let want = (0..tris.len())
+                .filter_map(|i| {
+                    let sh = triangle::RayShear::new(o, d)?;
+                    let [a, b, c] = tris[i];
+                    triangle::intersect(&sh, a.into(), b.into(), c.into(), f32::INFINITY).map(|h| h.0)
+                })
+                .fold(None, |m: Option<f32>, t| Some(m.map_or(t, |m| m.min(t))));
+            let got = bvh.intersect(o, d, f32::INFINITY);
+            assert_eq!(want, got.map(|h| h.0), "ray {o} {d}");
+            let got_heap = heap.intersect(o, d, f32::INFINITY);
+            assert_eq!(got.map(|h| (h.0, h.1)), got_heap.map(|h| (h.0, h.1)));
+            assert_eq!(heap.occluded(o, d, f32::INFINITY), got.is_some());
+            hits += got.is_some() as usize;
+        }
+        // Enough hits at many scales for the comparison to mean something.
+        assert!(hits > 1000, "only {hits} hits");
+    }
 }
