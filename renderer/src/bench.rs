@@ -297,8 +297,9 @@ pub struct EmbreeSetup {
 }
 
 /// Builds the BVH of `mesh` (timed; the best of three builds), then traces each ray set with
-/// `threads` threads and with one (best of `repeats` runs each), and with Embree if `embree` is
-/// given. Rays/s count closest-hit queries only.
+/// `threads` threads, with one, and with Embree if `embree` is given, alternating run by run
+/// (best of `repeats` runs each). Rays/s count closest-hit queries only; see `RaySetReport`
+/// for the clocks.
 pub fn ray_bench(mesh: &Mesh, sets: &[(&str, &RayBatch)], threads: usize, repeats: usize, embree: Option<&EmbreeSetup>) -> Result<RayBenchReport> {
     let threads = threads.max(1);
     let pool = |n: usize| rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| Error::Invalid(e.to_string()));
