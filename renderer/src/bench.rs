@@ -152,6 +152,16 @@ pub struct EmbreeResult {
     pub hits: Vec<Option<(u32, f32)>>,
     pub query_seconds: f64,
     pub build_seconds: f64,
+    /// CPU time of the (single) querying thread.
+    pub query_cpu_seconds: f64,
+}
+
+/// CPU time the calling thread has run, in seconds (Linux: /proc/thread-self/schedstat, in ns);
+/// `None` where unavailable.
+pub fn thread_cpu_seconds() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    let ns: u64 = s.split_whitespace().next()?.parse().ok()?;
+    Some(ns as f64 * 1e-9)
 }
 
 /// Location of the Python helper, relative to the workspace root.
@@ -229,7 +239,7 @@ pub fn embree_trace(python: &Path, script: &Path, work_dir: &Path, mesh: &Mesh, 
     let _ = std::fs::remove_file(&output);
     let n = batch.len();
     let bad = |m: &str| Error::scene(&output, "contents", m.to_string());
-    if data.len() != 32 + n * 8 || &data[..8] != b"PGRH0001" {
+    if data.len() != 40 + n * 8 || &data[..8] != b"PGRH0002" {
         return Err(bad("unexpected size or magic"));
     }
     let u64_at = |o: usize| u64::from_le_bytes(data[o..o + 8].try_into().unwrap());
@@ -238,16 +248,17 @@ pub fn embree_trace(python: &Path, script: &Path, work_dir: &Path, mesh: &Mesh, 
     }
     let query_seconds = f64::from_bits(u64_at(16));
     let build_seconds = f64::from_bits(u64_at(24));
+    let query_cpu_seconds = f64::from_bits(u64_at(32));
     let hits = (0..n)
         .map(|i| {
-            let o = 32 + i * 4;
+            let o = 40 + i * 4;
             let prim = i32::from_le_bytes(data[o..o + 4].try_into().unwrap());
-            let o = 32 + n * 4 + i * 4;
+            let o = 40 + n * 4 + i * 4;
             let t = f32::from_le_bytes(data[o..o + 4].try_into().unwrap());
             (prim >= 0).then_some((prim as u32, t))
         })
         .collect();
-    Ok(EmbreeResult { hits, query_seconds, build_seconds })
+    Ok(EmbreeResult { hits, query_seconds, build_seconds, query_cpu_seconds })
 }
 
 /// Figures for one ray set.
@@ -256,10 +267,13 @@ pub struct RaySetReport {
     pub name: String,
     pub rays: usize,
     pub hit_fraction: f64,
-    /// Our closest-hit rays/s on `threads` threads and on one thread.
+    /// Our closest-hit rays/s on `threads` threads (per wall-clock second) and on one thread
+    /// (per CPU second of that thread, so that other processes taking the CPU on a shared
+    /// machine do not count; wall clock where thread CPU time is unavailable).
     pub ours_mt: f64,
     pub ours_1t: f64,
-    /// Embree's single-thread rays/s (embreex loops rtcIntersect1 on one thread).
+    /// Embree's single-thread rays/s (embreex loops rtcIntersect1 on one thread), per CPU second
+    /// of that thread like `ours_1t`.
     pub embree_1t: Option<f64>,
 }
 
@@ -283,8 +297,9 @@ pub struct EmbreeSetup {
 }
 
 /// Builds the BVH of `mesh` (timed; the best of three builds), then traces each ray set with
-/// `threads` threads and with one (best of `repeats` runs each), and with Embree if `embree` is
-/// given. Rays/s count closest-hit queries only.
+/// `threads` threads, with one, and with Embree if `embree` is given, alternating run by run
+/// (best of `repeats` runs each). Rays/s count closest-hit queries only; see `RaySetReport`
+/// for the clocks.
 pub fn ray_bench(mesh: &Mesh, sets: &[(&str, &RayBatch)], threads: usize, repeats: usize, embree: Option<&EmbreeSetup>) -> Result<RayBenchReport> {
     let threads = threads.max(1);
     let pool = |n: usize| rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| Error::Invalid(e.to_string()));
@@ -299,35 +314,40 @@ pub fn ray_bench(mesh: &Mesh, sets: &[(&str, &RayBatch)], threads: usize, repeat
         accel = Some(a);
     }
     let accel = accel.expect("built three times");
-    let best_rate = |p: &rayon::ThreadPool, batch: &RayBatch| {
-        let mut best = 0.0f64;
-        let mut hits = 0usize;
-        for _ in 0..repeats.max(1) {
-            let t0 = Instant::now();
-            let r: Vec<Option<Hit>> = p.install(|| trace(&accel, batch, 0));
-            let s = t0.elapsed().as_secs_f64();
-            hits = r.iter().filter(|h| h.is_some()).count();
-            best = best.max(batch.len() as f64 / s);
-        }
-        (best, hits)
+    // Rays/s and hit count; with `cpu`, per CPU second of the thread that traced (the pool has
+    // one thread, which runs the whole parallel iterator), else per wall-clock second.
+    let rate = |p: &rayon::ThreadPool, batch: &RayBatch, cpu: bool| {
+        let (s, r) = p.install(|| {
+            let (t0, c0) = (Instant::now(), thread_cpu_seconds());
+            let r: Vec<Option<Hit>> = trace(&accel, batch, 0);
+            let wall = t0.elapsed().as_secs_f64();
+            let s = match (cpu, c0, thread_cpu_seconds()) {
+                (true, Some(a), Some(b)) if b > a => b - a,
+                _ => wall,
+            };
+            (s, r)
+        });
+        (batch.len() as f64 / s, r.iter().filter(|h| h.is_some()).count())
     };
     let mut reports = Vec::new();
     let mut embree_build = None;
     for (name, batch) in sets {
-        let (ours_mt, hits) = best_rate(&pool_mt, batch);
-        let (ours_1t, _) = best_rate(&pool_1t, batch);
-        let embree_1t = match embree {
-            Some(e) => {
-                let mut best = 0.0f64;
-                for _ in 0..repeats.max(1) {
-                    let r = embree_trace(&e.python, &e.script, &e.work_dir, mesh, batch, e.robust)?;
-                    best = best.max(batch.len() as f64 / r.query_seconds);
-                    embree_build = Some(embree_build.map_or(r.build_seconds, |b: f64| b.min(r.build_seconds)));
-                }
-                Some(best)
+        // Ours and Embree alternate, run by run, so that both see the same share of whatever
+        // else loads the machine; the best run of each is reported.
+        let (mut ours_mt, mut ours_1t, mut hits) = (0.0f64, 0.0f64, 0);
+        let mut embree_1t: Option<f64> = None;
+        for _ in 0..repeats.max(1) {
+            let (r, h) = rate(&pool_mt, batch, false);
+            ours_mt = ours_mt.max(r);
+            hits = h;
+            ours_1t = ours_1t.max(rate(&pool_1t, batch, true).0);
+            if let Some(e) = embree {
+                let r = embree_trace(&e.python, &e.script, &e.work_dir, mesh, batch, e.robust)?;
+                let secs = if r.query_cpu_seconds > 0.0 { r.query_cpu_seconds } else { r.query_seconds };
+                embree_1t = Some(embree_1t.unwrap_or(0.0).max(batch.len() as f64 / secs));
+                embree_build = Some(embree_build.map_or(r.build_seconds, |b: f64| b.min(r.build_seconds)));
             }
-            None => None,
-        };
+        }
         reports.push(RaySetReport {
             name: name.to_string(),
             rays: batch.len(),
@@ -349,7 +369,7 @@ pub fn ray_bench(mesh: &Mesh, sets: &[(&str, &RayBatch)], threads: usize, repeat
 
 impl fmt::Display for RayBenchReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(f, "{} triangles: BVH build {:.1} ms on {} threads ({} CWBVH nodes)", self.triangles, self.build_seconds * 1e3, self.threads, self.bvh_nodes)?;
+        writeln!(f, "{} triangles: BVH build {:.1} ms on {} threads ({} BVH8 nodes)", self.triangles, self.build_seconds * 1e3, self.threads, self.bvh_nodes)?;
         if let Some(b) = self.embree_build_seconds {
             writeln!(f, "  Embree scene build {:.1} ms (embreex default: TBB threads)", b * 1e3)?;
         }

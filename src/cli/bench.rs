@@ -96,7 +96,7 @@ fn rays(scene: &Scene, a: &BenchArgs, threads: usize) -> Result<()> {
         let cam = RayBatch::camera(mesh, a.rays, 1);
         let rnd = RayBatch::random_in_bounds(mesh, a.rays, 2);
         let report = ray_bench(mesh, &[("camera", &cam), ("random", &rnd)], threads, a.repeat as usize, embree.as_ref())?;
-        println!("\nrays: {name} (Embree fast mode)\n{report}");
+        println!("\nrays: {name} (Embree fast mode; 1t rates per CPU second of the tracing thread)\n{report}");
     }
     Ok(())
 }

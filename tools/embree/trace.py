@@ -10,10 +10,12 @@ INPUT (little endian, written by renderer/src/bench.rs):
     f32     R*3 ray origins, R*3 ray directions, R ray tmax values
 
 OUTPUT:
-    magic   b"PGRH0001"
+    magic   b"PGRH0002"
     u64     R
-    f64     seconds spent in the Embree ray query only (scene build excluded)
+    f64     seconds spent in the Embree ray query only (scene build excluded), wall clock
     f64     seconds spent building the scene (the first query commits it)
+    f64     CPU seconds of this thread spent in the ray query (time.thread_time: immune to other
+            processes taking the CPU on a shared machine; the query runs on this one thread)
     i32     R primitive ids (-1 = miss)
     f32     R hit distances (tfar; meaningless on a miss)
 
@@ -64,15 +66,17 @@ def main() -> int:
     build = time.perf_counter() - t0
 
     t0 = time.perf_counter()
+    c0 = time.thread_time()
     res = scene.run(origins, dirs, dists=tmax, output=1)
+    query_cpu = time.thread_time() - c0
     query = time.perf_counter() - t0
 
     prim = np.ascontiguousarray(res["primID"], dtype="<i4")
     prim = np.where(prim < 0, -1, prim).astype("<i4")
     tfar = np.ascontiguousarray(res["tfar"], dtype="<f4")
     with open(sys.argv[2], "wb") as f:
-        f.write(b"PGRH0001")
-        f.write(struct.pack("<Qdd", n_rays, query, build))
+        f.write(b"PGRH0002")
+        f.write(struct.pack("<Qddd", n_rays, query, build, query_cpu))
         f.write(prim.tobytes())
         f.write(tfar.tobytes())
     return 0

@@ -63,13 +63,19 @@ pub fn intersect(r: &RayShear, p0: Vec3A, p1: Vec3A, p2: Vec3A, tmax: f32) -> Op
     let a = p0 - r.origin;
     let b = p1 - r.origin;
     let c = p2 - r.origin;
-    let ax = a.dot(r.mx);
-    let ay = a.dot(r.my);
-    let bx = b.dot(r.mx);
-    let by = b.dot(r.my);
-    let cx = c.dot(r.mx);
-    let cy = c.dot(r.my);
+    let s = |p: Vec3A| [p.dot(r.mx), p.dot(r.my), p.dot(r.mz)];
+    intersect_sheared(s(a), s(b), s(c), tmax)
+}
 
+/// The test on already sheared vertices `[x, y, z]` (relative to the ray origin, z scaled by
+/// 1/d_kz): `x = a_kx − sx·a_kz`, `y = a_ky − sy·a_kz`, `z = sz·a_kz`. The BVH's four-wide
+/// test performs the same operations lane by lane and falls back to this function when an edge
+/// function rounds to zero.
+#[inline(always)]
+pub fn intersect_sheared(a: [f32; 3], b: [f32; 3], c: [f32; 3], tmax: f32) -> Option<(f32, f32, f32)> {
+    let [ax, ay, az] = a;
+    let [bx, by, bz] = b;
+    let [cx, cy, cz] = c;
     let mut u = cx * by - cy * bx;
     let mut v = ax * cy - ay * cx;
     let mut w = bx * ay - by * ax;
@@ -88,17 +94,17 @@ pub fn intersect(r: &RayShear, p0: Vec3A, p1: Vec3A, p2: Vec3A, tmax: f32) -> Op
     if det == 0.0 || !det.is_finite() {
         return None;
     }
-    let t_scaled = u * a.dot(r.mz) + v * b.dot(r.mz) + w * c.dot(r.mz);
+    let t_scaled = u * az + v * bz + w * cz;
     // Compare before dividing (sign-aware) so a back-facing det never flips the range test.
     let (ts, d) = if det < 0.0 { (-t_scaled, -det) } else { (t_scaled, det) };
     if !(ts > 0.0) || !(ts < tmax * d) {
         return None;
     }
-    let inv = 1.0 / det;
-    let t = t_scaled * inv;
+    let t = t_scaled / det;
     if !(t > 0.0 && t < tmax) {
         return None;
     }
+    let inv = 1.0 / det;
     Some((t, v * inv, w * inv))
 }
 
