@@ -23,6 +23,9 @@ pub struct RenderArgs {
     /// Maximum bounces (default: the scene's, normally 5).
     #[arg(long)]
     pub max_bounces: Option<u32>,
+    /// Image size WxH instead of the scene's (e.g. the size of a --reference).
+    #[arg(long, value_parser = crate::cli::dataset::parse_size)]
+    pub size: Option<(u32, u32)>,
     /// Output EXR (radiance with variance; with --aovs every buffer).
     #[arg(short, long, default_value = "out.exr")]
     pub output: PathBuf,
@@ -85,7 +88,11 @@ pub fn run(a: RenderArgs) -> Result<()> {
             std::fs::create_dir_all(dir).with_context(|| format!("creating the output folder {}", dir.display()))?;
         }
     }
-    let scene = Scene::load(&a.scene)?;
+    let mut scene = Scene::load(&a.scene)?;
+    if let Some((w, h)) = a.size {
+        scene.camera.width = w;
+        scene.camera.height = h;
+    }
     let request = match (a.aovs, a.denoise.0) {
         (true, _) => BufferRequest::ALL,
         (false, Some(m)) => BufferRequest { split: true, gbuffers: true, descriptors: m.needs_descriptors() },
