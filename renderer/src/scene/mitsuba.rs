@@ -729,19 +729,23 @@ impl<'a, 'i> Loader<'a, 'i> {
         }
         let def = bsdf.unwrap_or_else(|| BsdfDef { name: "default".into(), kind: MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::splat(0.5)) } });
         let emission = emission.unwrap_or(Vec3::ZERO);
+        let obj_path = match (ty.as_str(), filename) {
+            ("obj", Some(file)) => Some(self.dir.join(file)),
+            ("obj", None) => return Err(self.err(n, "an obj shape needs <string name=\"filename\">")),
+            _ => None,
+        };
+        if let Some(p) = obj_path.as_ref().filter(|p| !p.is_file()) {
+            // Published scenes sometimes ship without a mesh (veach-ajar's teapots); the rest
+            // of the scene is still worth rendering.
+            self.warn(n, format!("mesh '{}' not found; skipping this shape", p.display()));
+            return Ok(());
+        }
         let material = self.material_for(&def, emission);
         let (v0, t0) = (self.b.mesh.positions.len(), self.b.mesh.triangles.len());
         let field = self.describe(n);
         let mesh: Option<TriMesh> = match ty.as_str() {
             "obj" => {
-                let file = filename.ok_or_else(|| self.err(n, "an obj shape needs <string name=\"filename\">"))?;
-                let p = self.dir.join(&file);
-                if !p.is_file() {
-                    // Published scenes sometimes ship without a mesh (veach-ajar's teapots);
-                    // the rest of the scene is still worth rendering.
-                    self.warn(n, format!("mesh '{}' not found; skipping this shape", p.display()));
-                    return Ok(());
-                }
+                let p = obj_path.expect("checked above");
                 let overrides = HashMap::new();
                 let choice = MaterialChoice { all: Some(material), by_name: &overrides };
                 obj::load(&mut self.b, &p, &to_world, &choice, &field)?;
