@@ -36,6 +36,9 @@ pub struct Original {
     fov_deg: f32,
     materials: Vec<Material>,
     has_environment: bool,
+    /// E_h/π of the scene's own environment: random skies keep the exposure the scene's author
+    /// chose (a dim fill around an area-lit set, a bright sky seen through blinds, daylight).
+    env_white: f32,
 }
 
 impl Original {
@@ -43,7 +46,22 @@ impl Original {
         let fov_deg = 2.0 * scene.camera.tan_half_fov.atan().to_degrees();
         let has_environment = scene.lights.env_radiance(Vec3::Y).max_element() > 0.0
             || scene.lights.env_radiance(Vec3::X).max_element() > 0.0;
-        Original { camera: scene.camera.clone(), fov_deg, materials: scene.materials.clone(), has_environment }
+        // E_h/π of the environment by the midpoint rule on a 32 × 64 (θ, φ) grid of the upper
+        // hemisphere; a sun disk of 1.5° falls between grid points now and then, so this is
+        // only a level, good to some ten per cent, which is all an exposure range needs.
+        let (nt, np) = (32, 64);
+        let mut e = 0.0f64;
+        for j in 0..nt {
+            let theta = (j as f32 + 0.5) / nt as f32 * std::f32::consts::FRAC_PI_2;
+            for i in 0..np {
+                let phi = (i as f32 + 0.5) / np as f32 * std::f32::consts::TAU;
+                let d = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
+                let d_omega = std::f32::consts::FRAC_PI_2 / nt as f32 * std::f32::consts::TAU / np as f32 * theta.sin();
+                e += (luminance(scene.lights.env_radiance(d)) * theta.cos() * d_omega) as f64;
+            }
+        }
+        let env_white = (e as f32) / crate::math::PI;
+        Original { camera: scene.camera.clone(), fov_deg, materials: scene.materials.clone(), has_environment, env_white }
     }
 }
 
@@ -64,12 +82,19 @@ pub fn horizontal_irradiance(map: &Texture) -> f32 {
     e as f32
 }
 
-/// Radiance a white Lambertian plane facing up should get from a randomised sky: the sky map is
-/// scaled so that E_h/π lands in this range (log-uniform). With albedos drawn in [0.01, 1]
+/// Radiance a white Lambertian plane facing up should get from a randomised sky when the scene's
+/// own environment gives no usable level: the sky map is scaled so that E_h/π lands in this
+/// range (log-uniform). Otherwise the range is 0.6–1.5 × the scene's own E_h/π (clamped to
+/// [`ENV_WHITE_LIMITS`]); the shipped outdoor scenes are authored at E_h/π ≈ 0.8, inside this. With albedos drawn in [0.01, 1]
 /// (mean ≈ 0.5) a sunlit floor then sits at 0.2–0.7 and sun-facing walls (which can receive
 /// several times E_h when the sun is low) rarely clip, while the old fixed scale of 0.5–2 on a
 /// sky whose zenith luminance is 1 gave E_h/π ≈ 2–20 and blew out most outdoor shots.
 pub const SKY_WHITE_RADIANCE: (f32, f32) = (0.45, 1.1);
+
+/// Bounds on the scene's own E_h/π that random skies are scaled around: below, a scene lit by
+/// its lamps with a near-black fill still gets a visible sky; above, a map that was already
+/// blown out in the scene file does not pass its overexposure on.
+pub const ENV_WHITE_LIMITS: (f32, f32) = (0.05, 6.0);
 
 /// The environment scale that gives a white horizontal plane radiance `white` under `map`
 /// (1 for a map with no light from above, where no scale can help).
@@ -130,10 +155,12 @@ fn random_material(orig: &Material, rng: &mut Pcg32) -> Material {
     m
 }
 
-/// Scores a camera by how much of a coarse 8×8 grid of its rays sees geometry far enough away;
-/// cameras inside objects or pressed against walls score low.
+/// Scores a camera by how much of a coarse 8×8 grid of its rays sees geometry far enough away
+/// (cameras inside objects or pressed against walls score low), times how many different
+/// materials it sees (a view filled by one wall teaches a denoiser little).
 fn camera_score(scene: &Scene, cam: &Camera) -> f32 {
     let mut score = 0.0;
+    let mut seen: Vec<u32> = Vec::new();
     for j in 0..8 {
         for i in 0..8 {
             let film = glam::Vec2::new((i as f32 + 0.5) / 8.0 * cam.width as f32, (j as f32 + 0.5) / 8.0 * cam.height as f32);
@@ -143,13 +170,27 @@ fn camera_score(scene: &Scene, cam: &Camera) -> f32 {
                     // Seeing the back of a one-sided wall means we are outside a room.
                     let n = scene.mesh.geometric_normal(h.prim as usize);
                     score += if n.dot(ray.dir) < 0.0 { 1.0 } else { 0.3 };
+                    let m = scene.mesh.material[h.prim as usize];
+                    if !seen.contains(&m) {
+                        seen.push(m);
+                    }
                 }
                 Some(_) => {}
                 None => score += 0.5,
             }
         }
     }
-    score / 64.0
+    // Up to four materials count; one material alone halves the score.
+    let variety = 0.5 + 0.5 * (seen.len().min(4) as f32 - 1.0).max(0.0) / 3.0;
+    score / 64.0 * variety
+}
+
+/// The point the scene's own camera looks at: its first hit along the view axis, or a point at
+/// half the scene size ahead when the axis sees nothing.
+fn original_target(scene: &Scene, cam: &Camera) -> Vec3 {
+    let ray = Ray::new(cam.position, cam.forward);
+    let t = scene.accel.intersect(&ray, f32::INFINITY).map_or(0.5 * scene.radius, |h| h.t);
+    cam.position + cam.forward * t
 }
 
 /// Applies shot `shot`'s randomisation to `scene` (restoring `orig` first) and returns what it did.
@@ -165,9 +206,19 @@ pub fn randomize(scene: &mut Scene, orig: &Original, name: &str, shot: u32, seed
     // Camera: the original view is one candidate, so a scene never gets a worse view than its own.
     let mut best = (camera_score(scene, &orig.camera), orig.camera.clone(), orig.camera.position, orig.camera.position + orig.camera.forward, orig.camera.up, orig.fov_deg);
     best.0 *= 0.8; // prefer new views when they are about as good
-    for _ in 0..12 {
+    let orig_target = original_target(scene, &orig.camera);
+    for k in 0..12 {
         let r3 = |rng: &mut Pcg32| Vec3::new(uniform(rng, -1.0, 1.0), uniform(rng, -1.0, 1.0), uniform(rng, -1.0, 1.0));
-        let (eye, target) = if inside {
+        let (eye, target) = if k % 3 != 2 {
+            // Two candidates in three orbit the scene's own view: the author framed the content
+            // there, while views drawn from the bounds alone mostly show floors and walls.
+            let offset = orig.camera.position - orig_target;
+            let dist = offset.length().max(1e-3);
+            let turn = glam::Quat::from_axis_angle(Vec3::Y, uniform(&mut rng, -60.0, 60.0).to_radians());
+            let dir = (turn * offset / dist + Vec3::Y * uniform(&mut rng, -0.3, 0.4)).normalize_or_zero();
+            let target = orig_target + r3(&mut rng) * 0.15 * dist;
+            (target + dir * dist * uniform(&mut rng, 0.6, 1.3), target)
+        } else if inside {
             (centre + r3(&mut rng) * half * 0.7, centre + r3(&mut rng) * half * 0.7)
         } else {
             let eye = centre + r3(&mut rng) * half.max(Vec3::splat(half.max_element() * 0.5)) * 2.5;
@@ -202,7 +253,14 @@ pub fn randomize(scene: &mut Scene, orig: &Original, name: &str, shot: u32, seed
             ..Default::default()
         };
         let image = bake(&p);
-        let (lo, hi) = SKY_WHITE_RADIANCE;
+        // Around the scene's own level, within sane bounds; a scene whose environment has no
+        // light from above (or an absurd amount) gets the default daylight range.
+        let (lo, hi) = if orig.env_white.is_finite() && orig.env_white > 0.0 {
+            let w = orig.env_white.clamp(ENV_WHITE_LIMITS.0, ENV_WHITE_LIMITS.1);
+            (w * 0.6, w * 1.5)
+        } else {
+            SKY_WHITE_RADIANCE
+        };
         let white = lo * (hi / lo).powf(rng.next_f32());
         let scale = sky_scale_for(&image, white);
         let name = format!("sky elev {:.1} az {:.1} turbidity {:.2} sun/sky {:.2} scale {:.2}", p.sun_elevation_deg, p.sun_azimuth_deg, p.turbidity, p.sun_to_sky, scale);
@@ -254,6 +312,30 @@ mod tests {
             let s = sky_scale_for(&map, 0.7);
             let white = s * horizontal_irradiance(&map) / crate::math::PI;
             assert!((white - 0.7).abs() < 1e-3, "elev {elev}: {white}");
+        }
+    }
+}
+
+#[cfg(test)]
+mod scene_tests {
+    use super::*;
+    use std::path::Path;
+
+    #[test]
+    fn random_skies_keep_the_scenes_exposure_and_cameras_see_content() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/metal-spheres-sky/scene.toml");
+        let mut scene = Scene::load(&path).unwrap();
+        let orig = Original::of(&scene);
+        // The scene is authored at E_h/π ≈ 0.8 (scale 0.11 on a sky of E_h ≈ 22); the 32 × 64 grid
+        // estimate is good to ~10 %, so 0.6–1.0 can only fail if the estimate is broken.
+        assert!(orig.env_white > 0.6 && orig.env_white < 1.0, "{}", orig.env_white);
+        for shot in 0..4 {
+            let p = randomize(&mut scene, &orig, "metal-spheres-sky", shot, 7);
+            let again = Original::of(&scene);
+            // 0.6–1.5 × the original, with the estimate's ~10 % error on either side.
+            let ratio = again.env_white / orig.env_white;
+            assert!(ratio > 0.5 && ratio < 1.7, "shot {shot}: ratio {ratio} ({})", p.environment);
+            assert!(camera_score(&scene, &scene.camera) > 0.2, "shot {shot} sees nothing");
         }
     }
 }

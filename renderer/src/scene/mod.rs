@@ -1,5 +1,5 @@
 //! Scenes: what a render needs (camera, settings, geometry, materials, lights), loaded from our
-//! TOML format, from glTF/GLB, or (later) Mitsuba XML.
+//! TOML format, from glTF/GLB, or from Mitsuba XML.
 
 use crate::camera::Camera;
 use crate::geometry::{Accel, Hit, Mesh};
@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 mod builder;
 pub mod gltf_format;
 pub mod image_io;
+pub mod mitsuba;
 pub mod obj;
 pub mod primitives;
 pub mod procedural;
@@ -189,13 +190,13 @@ impl Scene {
 }
 
 /// Dispatches on the file extension to a loader: `.toml` (our format, docs/scene-format.md),
-/// `.gltf`/`.glb`.
+/// `.gltf`/`.glb`, `.xml` (Mitsuba, `mitsuba.rs`).
 pub fn load_description(path: &Path) -> Result<SceneDescription> {
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     match ext.as_deref() {
         Some("toml") => toml_format::load(path),
         Some("gltf") | Some("glb") => gltf_format::load_scene(path),
-        Some("xml") => Err(Error::scene(path, "file", "Mitsuba XML scenes are not supported yet")),
-        _ => Err(Error::scene(path, "file", "unknown scene format (expected .toml, .gltf or .glb)")),
+        Some("xml") => mitsuba::load(path),
+        _ => Err(Error::scene(path, "file", "unknown scene format (expected .toml, .gltf, .glb or Mitsuba .xml)")),
     }
 }

@@ -375,4 +375,32 @@ mod tests {
         assert!(grid(GridElement::Cube, [1000, 1000, 1], Vec3::ONE, Vec3::ONE, 8).is_err());
         assert!(grid(GridElement::Cube, [1, 1, 1], Vec3::ONE, Vec3::new(1.0, 0.0, 1.0), 8).is_err());
     }
+
+    /// The TOML wiring: good shapes load, and each bad parameter is an error naming the shape's
+    /// field.
+    #[test]
+    fn toml_shapes_load_and_name_bad_fields() {
+        let dir = std::env::temp_dir().join(format!("pixguide-procedural-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let head = "[camera]\nposition = [0, 1, 4]\ntarget = [0, 0, 0]\nresolution = [8, 8]\n[materials.m]\ntype = \"diffuse\"\nemission = [1, 1, 1]\n";
+        let load = |name: &str, shape: &str| {
+            let p = dir.join(name);
+            std::fs::write(&p, format!("{head}[[shapes]]\nmaterial = \"m\"\n{shape}")).unwrap();
+            crate::scene::toml_format::load(&p).map(|d| d.mesh.triangles.len()).map_err(|e| e.to_string())
+        };
+        assert_eq!(load("a.toml", "type = \"grid\"\ncount = [2, 3, 1]\n").unwrap(), 6 * 12);
+        assert!(load("b.toml", "type = \"lathe\"\nprofile = [[0, 0], [1, 0], [0, 1]]\nsegments = 8\n").unwrap() == 16);
+        assert!(load("c.toml", "type = \"heightfield\"\nresolution = [4, 4]\n").unwrap() == 32);
+        let e = load("d.toml", "type = \"lathe\"\nprofile = [[1, 0]]\n").unwrap_err();
+        assert!(e.contains("shapes[0].profile") && e.contains("at least 2"), "{e}");
+        let e = load("e.toml", "type = \"grid\"\ncount = [1, 1, 1]\namplitude = 2\n").unwrap_err();
+        assert!(e.contains("shapes[0].amplitude"), "{e}");
+        let e = load("f.toml", "type = \"grid\"\ncount = [1, 1, 1]\nelement = \"cone\"\n").unwrap_err();
+        assert!(e.contains("shapes[0].element") && e.contains("cone"), "{e}");
+        let e = load("g.toml", "type = \"heightfield\"\nfrequency = -1\n").unwrap_err();
+        assert!(e.contains("shapes[0]") && e.contains("frequency"), "{e}");
+        let e = load("h.toml", "type = \"grid\"\n").unwrap_err();
+        assert!(e.contains("shapes[0].count"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
 }

@@ -1,0 +1,808 @@
+//! Mitsuba 0.5/0.6 XML scenes: the subset of the format that the scenes of Bitterli's
+//! rendering resources (the collection the paper trained on) use. docs/scene-format.md,
+//! "Mitsuba XML", lists what is read and how it is approximated.
+//!
+//! Everything the loader does not understand is an error naming the file, the line and the
+//! element (`scene.xml: line 12 <bsdf type="hair">: unsupported BSDF type`), never a silent
+//! default: a scene that renders differently from what its author made would poison a test.
+//! The few things that are read but approximated (a textured specular reflectance becomes its
+//! mean, a one-sided diffuse becomes two-sided) print a warning.
+
+use super::builder::{check_resolution, warn, Builder};
+use super::obj::MaterialChoice;
+use super::primitives::{self, TriMesh};
+use super::toml_format::CONDUCTOR_PRESETS;
+use super::{obj, ColorParam, Material, MaterialKind, RenderSettings, SceneDescription};
+use crate::camera::Camera;
+use crate::light::Environment;
+use crate::texture::srgb_to_linear;
+use crate::{Error, Result};
+use glam::{Mat3, Mat4, Vec3};
+use roxmltree::{Document, Node};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+/// Mitsuba's default film size (768 × 576) and field of view axis ("x").
+const DEFAULT_FILM: (u32, u32) = (768, 576);
+
+/// Named dielectrics of Mitsuba's IOR table (the ones scenes use), at 589 nm.
+const IOR_NAMES: &[(&str, f32)] = &[
+    ("vacuum", 1.0),
+    ("helium", 1.000036),
+    ("hydrogen", 1.000132),
+    ("air", 1.000277),
+    ("carbon dioxide", 1.00045),
+    ("water", 1.333),
+    ("acetone", 1.36),
+    ("ethanol", 1.361),
+    ("carbon tetrachloride", 1.461),
+    ("glycerol", 1.4729),
+    ("benzene", 1.501),
+    ("silicone oil", 1.52045),
+    ("bromine", 1.661),
+    ("water ice", 1.31),
+    ("fused quartz", 1.458),
+    ("pyrex", 1.470),
+    ("acrylic glass", 1.49),
+    ("polypropylene", 1.49),
+    ("bk7", 1.5046),
+    ("sodium chloride", 1.544),
+    ("amber", 1.55),
+    ("pet", 1.575),
+    ("diamond", 2.419),
+];
+
+/// Loads a Mitsuba XML scene.
+pub fn load(path: &Path) -> Result<SceneDescription> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let doc = Document::parse(&text).map_err(|e| {
+        let p = e.pos();
+        Error::scene(path, format!("line {}, column {}", p.row, p.col), format!("malformed XML: {e}"))
+    })?;
+    let root = doc.root_element();
+    let mut l = Loader {
+        file: path.to_path_buf(),
+        dir: path.parent().unwrap_or(Path::new("")).to_path_buf(),
+        doc: &doc,
+        defaults: HashMap::new(),
+        bsdfs: HashMap::new(),
+        textures: HashMap::new(),
+        b: Builder::new(path),
+    };
+    if root.tag_name().name() != "scene" {
+        return Err(l.err(root, "the root element must be <scene>"));
+    }
+    l.run(root)
+}
+
+/// A BSDF read from the XML, before it becomes a scene material (emitters copy it).
+#[derive(Clone)]
+struct BsdfDef {
+    name: String,
+    kind: MaterialKind,
+}
+
+/// A colour parameter: a constant or a texture node (resolved when the material is built).
+enum Spectrum<'a, 'i> {
+    Const(Vec3),
+    Texture(Node<'a, 'i>),
+}
+
+struct Loader<'a, 'i> {
+    file: PathBuf,
+    dir: PathBuf,
+    doc: &'a Document<'i>,
+    /// `<default name value>` parameters, substituted for `$name` in attribute values.
+    defaults: HashMap<String, String>,
+    bsdfs: HashMap<String, BsdfDef>,
+    textures: HashMap<String, Node<'a, 'i>>,
+    b: Builder,
+}
+
+impl<'a, 'i> Loader<'a, 'i> {
+    fn line(&self, n: Node<'a, 'i>) -> u32 {
+        self.doc.text_pos_at(n.range().start).row
+    }
+
+    fn describe(&self, n: Node<'a, 'i>) -> String {
+        match n.attribute("type").or_else(|| n.attribute("name")) {
+            Some(t) if n.has_attribute("type") => format!("line {} <{} type=\"{t}\">", self.line(n), n.tag_name().name()),
+            Some(t) => format!("line {} <{} name=\"{t}\">", self.line(n), n.tag_name().name()),
+            None => format!("line {} <{}>", self.line(n), n.tag_name().name()),
+        }
+    }
+
+    fn err(&self, n: Node<'a, 'i>, message: impl Into<String>) -> Error {
+        Error::scene(&self.file, self.describe(n), message)
+    }
+
+    fn warn(&self, n: Node<'a, 'i>, message: impl std::fmt::Display) {
+        warn(&self.file, format!("{}: {message}", self.describe(n)));
+    }
+
+    /// An attribute with `$name` defaults substituted.
+    fn attr(&self, n: Node<'a, 'i>, key: &str) -> Result<Option<String>> {
+        let Some(v) = n.attribute(key) else { return Ok(None) };
+        if !v.contains('$') {
+            return Ok(Some(v.to_string()));
+        }
+        let mut out = String::new();
+        let mut rest = v;
+        while let Some(i) = rest.find('$') {
+            out.push_str(&rest[..i]);
+            let after = &rest[i + 1..];
+            let len = after.find(|c: char| !(c.is_alphanumeric() || c == '_')).unwrap_or(after.len());
+            let name = &after[..len];
+            let value = self.defaults.get(name).ok_or_else(|| self.err(n, format!("attribute {key}=\"{v}\" uses ${name}, which has no <default>")))?;
+            out.push_str(value);
+            rest = &after[len..];
+        }
+        out.push_str(rest);
+        Ok(Some(out))
+    }
+
+    fn required(&self, n: Node<'a, 'i>, key: &str) -> Result<String> {
+        self.attr(n, key)?.ok_or_else(|| self.err(n, format!("missing attribute `{key}`")))
+    }
+
+    fn elements(n: Node<'a, 'i>) -> impl Iterator<Item = Node<'a, 'i>> {
+        n.children().filter(|c| c.is_element())
+    }
+
+    fn float(&self, n: Node<'a, 'i>) -> Result<f32> {
+        let v = self.required(n, "value")?;
+        let x: f32 = v.trim().parse().map_err(|_| self.err(n, format!("value \"{v}\" is not a number")))?;
+        if !x.is_finite() {
+            return Err(self.err(n, format!("value \"{v}\" is not finite")));
+        }
+        Ok(x)
+    }
+
+    fn integer(&self, n: Node<'a, 'i>) -> Result<i64> {
+        let v = self.required(n, "value")?;
+        v.trim().parse().map_err(|_| self.err(n, format!("value \"{v}\" is not an integer")))
+    }
+
+    fn boolean(&self, n: Node<'a, 'i>) -> Result<bool> {
+        match self.required(n, "value")?.trim() {
+            "true" => Ok(true),
+            "false" => Ok(false),
+            v => Err(self.err(n, format!("value \"{v}\" is not true or false"))),
+        }
+    }
+
+    /// Numbers separated by commas and/or whitespace.
+    fn numbers(&self, n: Node<'a, 'i>, v: &str) -> Result<Vec<f32>> {
+        v.split(|c: char| c == ',' || c.is_whitespace())
+            .filter(|s| !s.is_empty())
+            .map(|s| s.parse::<f32>().ok().filter(|x| x.is_finite()).ok_or_else(|| self.err(n, format!("\"{s}\" in \"{v}\" is not a finite number"))))
+            .collect()
+    }
+
+    /// `<rgb>`, `<srgb>` or a constant `<spectrum>` (one value, or three for RGB).
+    fn color(&self, n: Node<'a, 'i>) -> Result<Vec3> {
+        let v = self.required(n, "value")?;
+        let tag = n.tag_name().name();
+        if tag == "spectrum" && v.contains(':') {
+            return Err(self.err(n, "sampled spectra (wavelength:value pairs) are not supported; give an <rgb>"));
+        }
+        let c = if tag == "srgb" && v.trim_start().starts_with('#') {
+            let hex = v.trim().trim_start_matches('#');
+            let byte = |i: usize| u8::from_str_radix(hex.get(i..i + 2).unwrap_or("zz"), 16).ok();
+            match (hex.len(), byte(0), byte(2), byte(4)) {
+                (6, Some(r), Some(g), Some(b)) => Vec3::new(r as f32, g as f32, b as f32) / 255.0,
+                _ => return Err(self.err(n, format!("\"{v}\" is not a #rrggbb colour"))),
+            }
+        } else {
+            match self.numbers(n, &v)?.as_slice() {
+                [x] => Vec3::splat(*x),
+                [r, g, b] => Vec3::new(*r, *g, *b),
+                _ => return Err(self.err(n, format!("\"{v}\" is neither one value nor three"))),
+            }
+        };
+        let c = if tag == "srgb" { Vec3::new(srgb_to_linear(c.x), srgb_to_linear(c.y), srgb_to_linear(c.z)) } else { c };
+        if c.min_element() < 0.0 {
+            return Err(self.err(n, format!("colour {c} has a negative component")));
+        }
+        Ok(c)
+    }
+
+    /// `<point>`/`<vector>`: x, y, z attributes (missing = 0) or a `value` list.
+    fn point(&self, n: Node<'a, 'i>) -> Result<Vec3> {
+        if let Some(v) = self.attr(n, "value")? {
+            return match self.numbers(n, &v)?.as_slice() {
+                [x, y, z] => Ok(Vec3::new(*x, *y, *z)),
+                _ => Err(self.err(n, format!("\"{v}\" is not three numbers"))),
+            };
+        }
+        let mut p = Vec3::ZERO;
+        for (i, k) in ["x", "y", "z"].iter().enumerate() {
+            if let Some(v) = self.attr(n, k)? {
+                p[i] = self.numbers(n, &v)?.first().copied().ok_or_else(|| self.err(n, format!("{k} is empty")))?;
+            }
+        }
+        Ok(p)
+    }
+
+    /// A `<transform>`: its operations in document order, each applied after the previous ones.
+    fn transform(&self, n: Node<'a, 'i>) -> Result<Mat4> {
+        let mut m = Mat4::IDENTITY;
+        for op in Self::elements(n) {
+            let xyz = |default: f32| -> Result<Vec3> {
+                let mut v = Vec3::splat(default);
+                if let Some(s) = self.attr(op, "value")? {
+                    let nums = self.numbers(op, &s)?;
+                    return match nums.as_slice() {
+                        [x] => Ok(Vec3::splat(*x)),
+                        [x, y, z] => Ok(Vec3::new(*x, *y, *z)),
+                        _ => Err(self.err(op, format!("\"{s}\" is neither one value nor three"))),
+                    };
+                }
+                for (i, k) in ["x", "y", "z"].iter().enumerate() {
+                    if let Some(s) = self.attr(op, k)? {
+                        v[i] = s.trim().parse::<f32>().ok().filter(|x| x.is_finite()).ok_or_else(|| self.err(op, format!("{k}=\"{s}\" is not a number")))?;
+                    }
+                }
+                Ok(v)
+            };
+            let step = match op.tag_name().name() {
+                "matrix" => {
+                    let v = self.required(op, "value")?;
+                    let a = self.numbers(op, &v)?;
+                    if a.len() != 16 {
+                        return Err(self.err(op, format!("a matrix needs 16 numbers, got {}", a.len())));
+                    }
+                    if a[12..] != [0.0, 0.0, 0.0, 1.0] {
+                        return Err(self.err(op, "the last row must be 0 0 0 1 (projective transforms are not supported)"));
+                    }
+                    // Row-major in the file; glam is column-major.
+                    Mat4::from_cols_array(&a.try_into().unwrap()).transpose()
+                }
+                "translate" => Mat4::from_translation(xyz(0.0)?),
+                "scale" => Mat4::from_scale(xyz(1.0)?),
+                "rotate" => {
+                    let axis = xyz(0.0)?;
+                    let angle = self.attr(op, "angle")?.ok_or_else(|| self.err(op, "missing attribute `angle`"))?;
+                    let angle: f32 = angle.trim().parse().ok().filter(|a: &f32| a.is_finite()).ok_or_else(|| self.err(op, format!("angle \"{angle}\" is not a number")))?;
+                    let axis = axis.try_normalize().ok_or_else(|| self.err(op, "the rotation axis is zero"))?;
+                    Mat4::from_axis_angle(axis, angle.to_radians())
+                }
+                "lookat" | "lookAt" => {
+                    let vec = |k: &str| -> Result<Vec3> {
+                        let s = self.attr(op, k)?.ok_or_else(|| self.err(op, format!("missing attribute `{k}`")))?;
+                        match self.numbers(op, &s)?.as_slice() {
+                            [x, y, z] => Ok(Vec3::new(*x, *y, *z)),
+                            _ => Err(self.err(op, format!("{k}=\"{s}\" is not three numbers"))),
+                        }
+                    };
+                    let (origin, target) = (vec("origin")?, vec("target")?);
+                    let up = if op.has_attribute("up") { vec("up")? } else { Vec3::Y };
+                    let dir = (target - origin).try_normalize().ok_or_else(|| self.err(op, "origin equals target"))?;
+                    let left = up.cross(dir).try_normalize().ok_or_else(|| self.err(op, "up is zero or parallel to the view"))?;
+                    let new_up = dir.cross(left);
+                    Mat4::from_cols(left.extend(0.0), new_up.extend(0.0), dir.extend(0.0), origin.extend(1.0))
+                }
+                other => return Err(self.err(op, format!("unsupported transform operation <{other}>"))),
+            };
+            m = step * m;
+        }
+        if !m.is_finite() {
+            return Err(self.err(n, "the transform is not finite"));
+        }
+        Ok(m)
+    }
+
+    fn run(&mut self, root: Node<'a, 'i>) -> Result<SceneDescription> {
+        let mut settings = RenderSettings::default();
+        let mut camera_node = None;
+        let mut environment = Environment::Constant(Vec3::ZERO);
+        for n in Self::elements(root) {
+            match n.tag_name().name() {
+                "default" => {
+                    let name = self.required(n, "name")?;
+                    let value = self.required(n, "value")?;
+                    self.defaults.entry(name).or_insert(value);
+                }
+                "integrator" => self.integrator(n, &mut settings)?,
+                "sensor" => {
+                    if camera_node.is_some() {
+                        return Err(self.err(n, "a second <sensor> (only one camera is supported)"));
+                    }
+                    camera_node = Some(n);
+                }
+                "bsdf" => {
+                    let id = self.attr(n, "id")?.ok_or_else(|| self.err(n, "a top-level <bsdf> needs an id"))?;
+                    let def = self.bsdf(n, &id)?;
+                    self.bsdfs.insert(id, def);
+                }
+                "texture" => {
+                    let id = self.attr(n, "id")?.ok_or_else(|| self.err(n, "a top-level <texture> needs an id"))?;
+                    self.textures.insert(id, n);
+                }
+                "shape" => self.shape(n)?,
+                "emitter" => environment = self.environment(n)?,
+                other => return Err(self.err(n, format!("unsupported element <{other}> in <scene>"))),
+            }
+        }
+        let camera = match camera_node {
+            Some(n) => self.sensor(n, &mut settings)?,
+            None => {
+                warn(&self.file, "no <sensor>; using a camera that frames the scene bounds");
+                self.b.framing_camera(DEFAULT_FILM.0, DEFAULT_FILM.1)?
+            }
+        };
+        let b = std::mem::replace(&mut self.b, Builder::new(&self.file));
+        b.finish(camera, settings, environment)
+    }
+
+    fn integrator(&self, n: Node<'a, 'i>, settings: &mut RenderSettings) -> Result<()> {
+        let t = self.required(n, "type")?;
+        if !matches!(t.as_str(), "path" | "volpath" | "volpath_simple") {
+            return Err(self.err(n, format!("unsupported integrator \"{t}\" (path tracers only)")));
+        }
+        for c in Self::elements(n) {
+            if c.attribute("name") == Some("maxDepth") {
+                // Mitsuba's maxDepth counts path segments (2 = direct light only, one scattering
+                // event); −1 means unlimited, for which our default stands.
+                let d = self.integer(c)?;
+                if d >= 1 {
+                    settings.max_bounces = (d - 1).min(64) as u32;
+                }
+            }
+            // Other integrator parameters (rrDepth, strictNormals, hideEmitters, ...) tune the
+            // sampling of Mitsuba's integrator, not the scene; ours has its own settings.
+        }
+        Ok(())
+    }
+
+    fn sensor(&self, n: Node<'a, 'i>, settings: &mut RenderSettings) -> Result<Camera> {
+        let t = self.required(n, "type")?;
+        if t != "perspective" {
+            return Err(self.err(n, format!("unsupported sensor type \"{t}\" (only perspective)")));
+        }
+        let (mut fov, mut axis, mut to_world) = (None, "x".to_string(), Mat4::IDENTITY);
+        let (mut w, mut h) = DEFAULT_FILM;
+        for c in Self::elements(n) {
+            let name = c.attribute("name").unwrap_or("");
+            match (c.tag_name().name(), name) {
+                ("float", "fov") => fov = Some(self.float(c)?),
+                ("string", "fovAxis") => axis = self.required(c, "value")?,
+                ("transform", "toWorld" | "to_world") => to_world = self.transform(c)?,
+                // Clip planes and focus distance change nothing for a pinhole camera without clipping.
+                ("float", "nearClip" | "farClip" | "focusDistance" | "shutterOpen" | "shutterClose") => {}
+                ("sampler", _) => {
+                    for s in Self::elements(c) {
+                        if s.attribute("name") == Some("sampleCount") {
+                            let spp = self.integer(s)?;
+                            if spp < 1 || spp > u32::MAX as i64 {
+                                return Err(self.err(s, format!("sampleCount {spp} must be at least 1")));
+                            }
+                            settings.spp = spp as u32;
+                        }
+                    }
+                }
+                ("film", _) => {
+                    for s in Self::elements(c) {
+                        match (s.tag_name().name(), s.attribute("name").unwrap_or("")) {
+                            ("integer", "width") => w = self.dim(s)?,
+                            ("integer", "height") => h = self.dim(s)?,
+                            ("integer", "cropOffsetX" | "cropOffsetY" | "cropWidth" | "cropHeight") => {
+                                return Err(self.err(s, "film crop windows are not supported"));
+                            }
+                            // Output format, tone mapping and the reconstruction filter: how
+                            // Mitsuba stores the image, not what the scene looks like.
+                            _ => {}
+                        }
+                    }
+                }
+                _ => return Err(self.err(c, "unsupported sensor parameter")),
+            }
+        }
+        check_resolution(&self.file, &self.describe(n), w, h)?;
+        let fov = fov.ok_or_else(|| self.err(n, "missing <float name=\"fov\"> (focalLength is not supported)"))?;
+        if !(fov > 0.0 && fov < 180.0) {
+            return Err(self.err(n, format!("fov {fov} is outside (0, 180) degrees")));
+        }
+        let (wf, hf) = (w as f32, h as f32);
+        // tan(vertical/2) = tan(fov/2) · (height / length of the side the fov spans).
+        let span = match axis.as_str() {
+            "x" => wf,
+            "y" => hf,
+            "diagonal" => (wf * wf + hf * hf).sqrt(),
+            "smaller" => wf.min(hf),
+            "larger" => wf.max(hf),
+            other => return Err(self.err(n, format!("unknown fovAxis \"{other}\" (x, y, diagonal, smaller, larger)"))),
+        };
+        let vfov = 2.0 * ((fov.to_radians() * 0.5).tan() * hf / span).atan().to_degrees();
+        // Mitsuba cameras look along +Z with +Y up; +X is the image's left.
+        let position = to_world.transform_point3(Vec3::ZERO);
+        let forward = to_world.transform_vector3(Vec3::Z).normalize_or_zero();
+        let up = to_world.transform_vector3(Vec3::Y).normalize_or_zero();
+        let left = to_world.transform_vector3(Vec3::X);
+        if left.dot(up.cross(forward)) < 0.0 {
+            self.warn(n, "the camera transform mirrors the image; rendering it unmirrored");
+        }
+        Camera::look_at(position, position + forward, up, vfov, w, h).ok_or_else(|| self.err(n, "degenerate camera transform (zero or parallel view and up)"))
+    }
+
+    fn dim(&self, n: Node<'a, 'i>) -> Result<u32> {
+        let v = self.integer(n)?;
+        u32::try_from(v).map_err(|_| self.err(n, format!("{v} is not a valid image size")))
+    }
+
+    /// A colour parameter: constant, an inline texture, or a `<ref>` to a texture.
+    fn spectrum(&self, n: Node<'a, 'i>) -> Result<Spectrum<'a, 'i>> {
+        match n.tag_name().name() {
+            "rgb" | "srgb" | "spectrum" => Ok(Spectrum::Const(self.color(n)?)),
+            "float" => Ok(Spectrum::Const(Vec3::splat(self.float(n)?.max(0.0)))),
+            "texture" => Ok(Spectrum::Texture(n)),
+            "ref" => {
+                let id = self.required(n, "id")?;
+                self.textures.get(&id).map(|&t| Spectrum::Texture(t)).ok_or_else(|| self.err(n, format!("no <texture id=\"{id}\"> defined before this")))
+            }
+            other => Err(self.err(n, format!("<{other}> is not a colour"))),
+        }
+    }
+
+    /// A texture as an albedo: bitmaps load as images; other textures become their mean colour.
+    fn albedo(&mut self, s: Spectrum<'a, 'i>) -> Result<ColorParam> {
+        match s {
+            Spectrum::Const(c) => Ok(ColorParam::Const(c.min(Vec3::ONE))),
+            Spectrum::Texture(t) => {
+                let ty = self.required(t, "type")?;
+                if ty != "bitmap" {
+                    let mean = self.texture_mean(t)?;
+                    self.warn(t, format!("a \"{ty}\" texture becomes its mean colour {mean}"));
+                    return Ok(ColorParam::Const(mean.min(Vec3::ONE)));
+                }
+                let mut file = None;
+                for c in Self::elements(t) {
+                    match (c.tag_name().name(), c.attribute("name").unwrap_or("")) {
+                        ("string", "filename") => file = Some(self.required(c, "value")?),
+                        // Filtering and wrapping: ours is bilinear and repeating.
+                        ("string", "filterType" | "wrapMode" | "wrapModeU" | "wrapModeV" | "filter_type" | "wrap_mode") => {}
+                        ("float", "maxAnisotropy") | ("boolean", "cache") => {}
+                        ("float", "gamma") => {
+                            let g = self.float(c)?;
+                            if g != -1.0 && (g - 2.2).abs() > 1e-3 {
+                                return Err(self.err(c, format!("gamma {g} is not supported (images are read as sRGB)")));
+                            }
+                        }
+                        ("float", "uscale" | "vscale" | "uoffset" | "voffset") => {
+                            let (v, name) = (self.float(c)?, c.attribute("name").unwrap());
+                            let identity = if name.ends_with("scale") { 1.0 } else { 0.0 };
+                            if v != identity {
+                                return Err(self.err(c, format!("texture coordinate {name} {v} is not supported")));
+                            }
+                        }
+                        _ => return Err(self.err(c, "unsupported bitmap parameter")),
+                    }
+                }
+                let file = file.ok_or_else(|| self.err(t, "a bitmap needs <string name=\"filename\">"))?;
+                let field = self.describe(t);
+                Ok(ColorParam::Texture { index: self.b.albedo_texture(&self.dir.join(&file), &field)?, scale: Vec3::ONE })
+            }
+        }
+    }
+
+    /// Mean colour of a procedural texture (checkerboard: the mean of its two colours).
+    fn texture_mean(&self, t: Node<'a, 'i>) -> Result<Vec3> {
+        let ty = self.required(t, "type")?;
+        match ty.as_str() {
+            "checkerboard" => {
+                let (mut c0, mut c1) = (Vec3::splat(0.4), Vec3::splat(0.2));
+                for c in Self::elements(t) {
+                    match (c.tag_name().name(), c.attribute("name").unwrap_or("")) {
+                        (_, "color0") => c0 = self.color(c)?,
+                        (_, "color1") => c1 = self.color(c)?,
+                        ("float", "uscale" | "vscale" | "uoffset" | "voffset") => {}
+                        _ => return Err(self.err(c, "unsupported checkerboard parameter")),
+                    }
+                }
+                Ok((c0 + c1) * 0.5)
+            }
+            "bitmap" => {
+                let file = Self::elements(t)
+                    .find(|c| c.attribute("name") == Some("filename"))
+                    .ok_or_else(|| self.err(t, "a bitmap needs <string name=\"filename\">"))?;
+                let file = self.required(file, "value")?;
+                let img = super::image_io::load_image(&self.dir.join(file), &self.file, &self.describe(t))?;
+                Ok(img.mean())
+            }
+            other => Err(self.err(t, format!("unsupported texture type \"{other}\""))),
+        }
+    }
+
+    /// A constant colour or a texture's mean, for parameters that cannot vary over a surface.
+    fn mean_color(&self, s: Spectrum<'a, 'i>) -> Result<(Vec3, bool)> {
+        match s {
+            Spectrum::Const(c) => Ok((c, false)),
+            Spectrum::Texture(t) => Ok((self.texture_mean(t)?, true)),
+        }
+    }
+
+    fn ior(&self, n: Node<'a, 'i>) -> Result<f32> {
+        if n.tag_name().name() == "string" {
+            let v = self.required(n, "value")?;
+            return IOR_NAMES
+                .iter()
+                .find(|(k, _)| k.eq_ignore_ascii_case(v.trim()))
+                .map(|&(_, x)| x)
+                .ok_or_else(|| self.err(n, format!("unknown IOR name \"{v}\"")));
+        }
+        let x = self.float(n)?;
+        if x <= 0.0 {
+            return Err(self.err(n, format!("IOR {x} must be positive")));
+        }
+        Ok(x)
+    }
+
+    fn bsdf(&mut self, n: Node<'a, 'i>, name: &str) -> Result<BsdfDef> {
+        let ty = self.required(n, "type")?;
+        if ty == "twosided" {
+            // Our BSDFs shade both sides alike, which is what twosided asks for.
+            let inner: Vec<_> = Self::elements(n).collect();
+            return match inner.as_slice() {
+                [one] if one.tag_name().name() == "bsdf" => self.bsdf(*one, name),
+                [one] if one.tag_name().name() == "ref" => {
+                    let id = self.required(*one, "id")?;
+                    self.bsdfs.get(&id).cloned().ok_or_else(|| self.err(*one, format!("no <bsdf id=\"{id}\"> defined before this")))
+                }
+                _ => Err(self.err(n, "twosided needs exactly one nested <bsdf> (two different sides are not supported)")),
+            };
+        }
+        let mut alpha: Option<f32> = None;
+        let (mut alpha_u, mut alpha_v) = (None, None);
+        let (mut int_ior, mut ext_ior) = (1.5046f32, 1.000277f32);
+        let mut reflectance: Option<Spectrum> = None;
+        let mut specular: Option<Spectrum> = None;
+        let mut transmittance: Option<Spectrum> = None;
+        let (mut eta, mut k, mut preset, mut ext_eta) = (None, None, None, 1.0f32);
+        for c in Self::elements(n) {
+            let pname = c.attribute("name").unwrap_or("");
+            match (ty.as_str(), pname) {
+                (_, "alpha") => alpha = Some(self.float(c)?.max(0.0)),
+                (_, "alphaU" | "alpha_u") => alpha_u = Some(self.float(c)?.max(0.0)),
+                (_, "alphaV" | "alpha_v") => alpha_v = Some(self.float(c)?.max(0.0)),
+                (_, "distribution") => {
+                    let d = self.required(c, "value")?;
+                    // Beckmann and GGX lobes of the same alpha have nearly the same width; ours is
+                    // GGX. Phong's exponent has no alpha at all.
+                    if !matches!(d.as_str(), "ggx" | "beckmann" | "as") {
+                        return Err(self.err(c, format!("microfacet distribution \"{d}\" is not supported (ggx, beckmann)")));
+                    }
+                }
+                ("diffuse" | "roughdiffuse", "reflectance") | ("plastic" | "roughplastic", "diffuseReflectance" | "diffuse_reflectance") => {
+                    reflectance = Some(self.spectrum(c)?)
+                }
+                (_, "specularReflectance" | "specular_reflectance") => specular = Some(self.spectrum(c)?),
+                ("dielectric" | "roughdielectric", "specularTransmittance" | "specular_transmittance") => transmittance = Some(self.spectrum(c)?),
+                ("dielectric" | "roughdielectric" | "plastic" | "roughplastic", "intIOR" | "int_ior") => int_ior = self.ior(c)?,
+                ("dielectric" | "roughdielectric" | "plastic" | "roughplastic", "extIOR" | "ext_ior") => ext_ior = self.ior(c)?,
+                ("conductor" | "roughconductor", "eta") => eta = Some(self.color(c)?),
+                ("conductor" | "roughconductor", "k") => k = Some(self.color(c)?),
+                ("conductor" | "roughconductor", "material") => preset = Some(self.required(c, "value")?),
+                ("conductor" | "roughconductor", "extEta" | "ext_eta") => ext_eta = self.ior(c)?,
+                // Mitsuba's plastic option for a wet look changes the diffuse colour only slightly.
+                ("plastic" | "roughplastic", "nonlinear") => {}
+                _ => return Err(self.err(c, format!("unsupported parameter of a \"{ty}\" BSDF"))),
+            }
+        }
+        let roughness = match (alpha, alpha_u, alpha_v) {
+            (Some(a), _, _) => a,
+            (None, Some(u), Some(v)) => {
+                if (u - v).abs() > 1e-3 {
+                    self.warn(n, format!("anisotropic roughness ({u}, {v}) becomes isotropic {}", (u * v).sqrt()));
+                }
+                (u * v).sqrt()
+            }
+            (None, Some(a), None) | (None, None, Some(a)) => a,
+            // Mitsuba's default roughness of the rough BSDFs.
+            (None, None, None) => {
+                if ty.starts_with("rough") {
+                    0.1
+                } else {
+                    0.0
+                }
+            }
+        };
+        let roughness = if ty.starts_with("rough") { roughness } else { 0.0 };
+        let specular_mean = |l: &Self, s: Option<Spectrum<'a, 'i>>, what: &str| -> Result<Vec3> {
+            match s {
+                None => Ok(Vec3::ONE),
+                Some(s) => {
+                    let (c, textured) = l.mean_color(s)?;
+                    if textured {
+                        l.warn(n, format!("a textured {what} becomes its mean {c}"));
+                    }
+                    Ok(c.min(Vec3::ONE))
+                }
+            }
+        };
+        let kind = match ty.as_str() {
+            "diffuse" | "roughdiffuse" => {
+                let albedo = self.albedo(reflectance.unwrap_or(Spectrum::Const(Vec3::splat(0.5))))?;
+                MaterialKind::Lambert { albedo }
+            }
+            "plastic" | "roughplastic" => {
+                let albedo = self.albedo(reflectance.unwrap_or(Spectrum::Const(Vec3::splat(0.5))))?;
+                let s = specular_mean(self, specular, "specular reflectance")?;
+                if (s - Vec3::ONE).abs().max_element() > 1e-3 {
+                    self.warn(n, format!("plastic specularReflectance {s} is ignored (the coat reflects by Fresnel alone)"));
+                }
+                MaterialKind::Plastic { albedo, ior: int_ior / ext_ior, roughness }
+            }
+            "dielectric" | "roughdielectric" => {
+                let r = specular_mean(self, specular, "specular reflectance")?;
+                let t = specular_mean(self, transmittance, "specular transmittance")?;
+                if (r - t).abs().max_element() > 1e-3 {
+                    self.warn(n, format!("reflectance {r} and transmittance {t} differ; both become {t}"));
+                }
+                MaterialKind::Dielectric { ior: int_ior / ext_ior, roughness, tint: t }
+            }
+            "conductor" | "roughconductor" => {
+                let (e, kk) = match (&preset, eta, k) {
+                    (Some(p), None, None) if p == "none" => (Vec3::ONE, Vec3::splat(20.0)),
+                    (Some(p), None, None) => {
+                        let (_, e, kk) = CONDUCTOR_PRESETS.iter().find(|(m, _, _)| m.eq_ignore_ascii_case(p)).ok_or_else(|| {
+                            let known: Vec<_> = CONDUCTOR_PRESETS.iter().map(|(m, _, _)| *m).collect();
+                            self.err(n, format!("unknown conductor material \"{p}\" (known: {}, none; or give eta and k)", known.join(", ")))
+                        })?;
+                        (Vec3::from(*e), Vec3::from(*kk))
+                    }
+                    (None, Some(e), Some(kk)) => (e, kk),
+                    // Mitsuba's default conductor is copper.
+                    (None, None, None) => (Vec3::from(CONDUCTOR_PRESETS[4].1), Vec3::from(CONDUCTOR_PRESETS[4].2)),
+                    _ => return Err(self.err(n, "give either `material` or both `eta` and `k`")),
+                };
+                if e.min_element() <= 0.0 {
+                    return Err(self.err(n, format!("eta {e} must be positive")));
+                }
+                let specular_tint = specular_mean(self, specular, "specular reflectance")?;
+                MaterialKind::Conductor { eta: e / ext_eta, k: kk / ext_eta, roughness, specular_tint }
+            }
+            other => return Err(self.err(n, format!("unsupported BSDF type \"{other}\""))),
+        };
+        Ok(BsdfDef { name: name.to_string(), kind })
+    }
+
+    fn shape(&mut self, n: Node<'a, 'i>) -> Result<()> {
+        let ty = self.required(n, "type")?;
+        let mut to_world = Mat4::IDENTITY;
+        let (mut filename, mut face_normals, mut flip) = (None, false, false);
+        let (mut center, mut radius) = (Vec3::ZERO, 1.0f32);
+        let mut bsdf: Option<BsdfDef> = None;
+        let mut emission: Option<Vec3> = None;
+        for c in Self::elements(n) {
+            match (c.tag_name().name(), c.attribute("name").unwrap_or("")) {
+                ("transform", "toWorld" | "to_world") => to_world = self.transform(c)?,
+                ("string", "filename") if ty == "obj" => filename = Some(self.required(c, "value")?),
+                ("boolean", "faceNormals" | "face_normals") => face_normals = self.boolean(c)?,
+                ("boolean", "flipNormals" | "flip_normals") => flip = self.boolean(c)?,
+                ("boolean", "flipTexCoords" | "flip_tex_coords") if ty == "obj" => {
+                    if !self.boolean(c)? {
+                        return Err(self.err(c, "flipTexCoords=false is not supported (OBJ texture coordinates are always flipped)"));
+                    }
+                }
+                ("point", "center") if ty == "sphere" => center = self.point(c)?,
+                ("float", "radius") if ty == "sphere" || ty == "disk" => {
+                    radius = self.float(c)?;
+                    if radius <= 0.0 {
+                        return Err(self.err(c, format!("radius {radius} must be positive")));
+                    }
+                }
+                ("ref", _) => {
+                    let id = self.required(c, "id")?;
+                    let def = self.bsdfs.get(&id).cloned().ok_or_else(|| self.err(c, format!("no <bsdf id=\"{id}\"> defined before this")))?;
+                    if bsdf.replace(def).is_some() {
+                        return Err(self.err(c, "a second BSDF for this shape"));
+                    }
+                }
+                ("bsdf", _) => {
+                    let name = format!("line {} bsdf", self.line(c));
+                    let def = self.bsdf(c, &name)?;
+                    if bsdf.replace(def).is_some() {
+                        return Err(self.err(c, "a second BSDF for this shape"));
+                    }
+                }
+                ("emitter", _) => {
+                    let et = self.required(c, "type")?;
+                    if et != "area" {
+                        return Err(self.err(c, format!("a shape's emitter must be \"area\", not \"{et}\"")));
+                    }
+                    let mut radiance = None;
+                    for p in Self::elements(c) {
+                        match p.attribute("name") {
+                            Some("radiance") => radiance = Some(self.color(p)?),
+                            Some("samplingWeight") => {}
+                            _ => return Err(self.err(p, "unsupported area emitter parameter")),
+                        }
+                    }
+                    emission = Some(radiance.ok_or_else(|| self.err(c, "an area emitter needs <rgb name=\"radiance\">"))?);
+                }
+                _ => return Err(self.err(c, format!("unsupported parameter of a \"{ty}\" shape"))),
+            }
+        }
+        let det = Mat3::from_mat4(to_world).determinant();
+        if det == 0.0 || !det.is_finite() {
+            return Err(self.err(n, "the shape's toWorld transform is singular"));
+        }
+        let def = bsdf.unwrap_or_else(|| BsdfDef { name: "default".into(), kind: MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::splat(0.5)) } });
+        let emission = emission.unwrap_or(Vec3::ZERO);
+        let obj_path = match (ty.as_str(), filename) {
+            ("obj", Some(file)) => Some(self.dir.join(file)),
+            ("obj", None) => return Err(self.err(n, "an obj shape needs <string name=\"filename\">")),
+            _ => None,
+        };
+        if let Some(p) = obj_path.as_ref().filter(|p| !p.is_file()) {
+            // Published scenes sometimes ship without a mesh (veach-ajar's teapots); the rest
+            // of the scene is still worth rendering.
+            self.warn(n, format!("mesh '{}' not found; skipping this shape", p.display()));
+            return Ok(());
+        }
+        let material = self.material_for(&def, emission);
+        let (v0, t0) = (self.b.mesh.positions.len(), self.b.mesh.triangles.len());
+        let field = self.describe(n);
+        let mesh: Option<TriMesh> = match ty.as_str() {
+            "obj" => {
+                let p = obj_path.expect("checked above");
+                let overrides = HashMap::new();
+                let choice = MaterialChoice { all: Some(material), by_name: &overrides };
+                obj::load(&mut self.b, &p, &to_world, &choice, &field)?;
+                None
+            }
+            "rectangle" => Some(primitives::quad()),
+            "cube" => Some(primitives::cube()),
+            "disk" => Some(primitives::disk(1.0, 64)),
+            "sphere" => Some(primitives::sphere(radius, 64).transformed(&Mat4::from_translation(center))),
+            other => return Err(self.err(n, format!("unsupported shape type \"{other}\""))),
+        };
+        if let Some(m) = mesh {
+            self.b.add_mesh(&m.transformed(&to_world), material, &field)?;
+        }
+        let mesh = &mut self.b.mesh;
+        if face_normals && !mesh.normals.is_empty() {
+            // A zero shading normal makes the renderer use the geometric one (Scene::surface).
+            mesh.normals[v0..].fill(Vec3::ZERO);
+        }
+        if flip {
+            for t in &mut mesh.triangles[t0..] {
+                t.swap(1, 2);
+            }
+            if !mesh.normals.is_empty() {
+                for nn in &mut mesh.normals[v0..] {
+                    *nn = -*nn;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The scene material of a BSDF (emitting or not), shared between shapes that use the same
+    /// BSDF without emission.
+    fn material_for(&mut self, def: &BsdfDef, emission: Vec3) -> u32 {
+        let name = if emission.max_element() > 0.0 { format!("{} (emitter {})", def.name, self.b.materials.len()) } else { def.name.clone() };
+        if emission.max_element() <= 0.0 {
+            if let Some(i) = self.b.materials.iter().position(|m| m.name == name && !m.is_emissive()) {
+                return i as u32;
+            }
+        }
+        self.b.add_material(Material { name, kind: def.kind.clone(), emission, two_sided_emission: false })
+    }
+
+    fn environment(&self, n: Node<'a, 'i>) -> Result<Environment> {
+        let ty = self.required(n, "type")?;
+        if ty != "constant" {
+            return Err(self.err(n, format!("unsupported emitter type \"{ty}\" (area emitters on shapes and \"constant\" are supported)")));
+        }
+        let mut radiance = Vec3::ONE;
+        for c in Self::elements(n) {
+            match c.attribute("name") {
+                Some("radiance") => radiance = self.color(c)?,
+                Some("samplingWeight") => {}
+                _ => return Err(self.err(c, "unsupported constant emitter parameter")),
+            }
+        }
+        Ok(Environment::Constant(radiance))
+    }
+}
