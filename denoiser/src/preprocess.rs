@@ -340,6 +340,12 @@ fn check_crop(
     Ok(())
 }
 
+/// One `dims` tensor from the same planar field of every crop of a batch.
+fn stack_planes<T>(crops: &[&T], field: &dyn Fn(&T) -> &[f32], dims: [usize; 4], device: &Device) -> Tensor<4> {
+    let data: Vec<f32> = crops.iter().flat_map(|c| field(c).iter().copied()).collect();
+    Tensor::from_data(TensorData::new(data, dims), device)
+}
+
 impl PreparedImage {
     pub fn crop(
         &self,
@@ -389,10 +395,7 @@ impl PreparedImage {
             "crops of a batch must agree in size and spp"
         );
         let b = crops.len();
-        let stack = |f: &dyn Fn(&PreparedImage) -> &[f32], ch: usize| -> Tensor<4> {
-            let data: Vec<f32> = crops.iter().flat_map(|c| f(c).iter().copied()).collect();
-            Tensor::from_data(TensorData::new(data, [b, ch, h, w]), device)
-        };
+        let stack = |f: &dyn Fn(&PreparedImage) -> &[f32], ch: usize| stack_planes(crops, f, [b, ch, h, w], device);
         let g_block = stack(&|c| &c.g_block, G_BLOCK);
         let descriptors: Tensor<5> = if crops.iter().all(|c| c.descriptors.is_some()) {
             let data: Vec<f32> = crops
@@ -449,10 +452,7 @@ impl PreparedTarget {
             "crops of a batch must agree in size"
         );
         let b = crops.len();
-        let stack = |f: &dyn Fn(&PreparedTarget) -> &[f32]| -> Tensor<4> {
-            let data: Vec<f32> = crops.iter().flat_map(|c| f(c).iter().copied()).collect();
-            Tensor::from_data(TensorData::new(data, [b, 3, h, w]), device)
-        };
+        let stack = |f: &dyn Fn(&PreparedTarget) -> &[f32]| stack_planes(crops, f, [b, 3, h, w], device);
         TargetTensors {
             diffuse: stack(&|c| &c.diffuse),
             specular: stack(&|c| &c.specular),
