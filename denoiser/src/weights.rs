@@ -11,8 +11,8 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use burn::store::{ApplyError, ModuleSnapshot, SafetensorsStore};
-use burn::tensor::Device;
+use burn::store::{ApplyError, FloatCastAdapter, ModuleSnapshot, SafetensorsStore};
+use burn::tensor::{DType, Device};
 use serde::{Deserialize, Serialize};
 
 use crate::method::{Method, MethodModel};
@@ -82,6 +82,11 @@ pub enum WeightsError {
 /// Writes `model` with its configuration and provenance. The file is written beside its final
 /// name and renamed into place (burn-store's atomic commit), so an interrupted save never leaves
 /// a truncated file where a good one was.
+///
+/// Tensors are stored as f16: it halves the shipped files (the guided model is 2.5 MB instead of
+/// 5), and the rounding (relative 2⁻¹¹ per weight) moves denoised pixels far less than the noise
+/// the models remove (see `f16_storage_is_close_and_stable`). Training checkpoints keep f32,
+/// since a resumed run must continue bit for bit.
 pub fn save(
     path: &Path,
     model: &MethodModel,
@@ -104,7 +109,8 @@ pub fn save(
         .metadata(keys::CONFIG, config_json)
         .metadata(keys::METHOD, method.name())
         .metadata(keys::PRESET, preset)
-        .metadata(keys::PROVENANCE, provenance_json);
+        .metadata(keys::PROVENANCE, provenance_json)
+        .with_to_adapter(FloatCastAdapter::to(DType::F16));
     model.save_into(&mut store).map_err(|e| err(e.to_string()))?;
     // The atomic write goes through a private temporary file (mode 0600); weights are meant to
     // be shared.
@@ -190,7 +196,11 @@ pub fn load(path: &Path, device: &Device) -> Result<Loaded, WeightsError> {
     let bytes = read(path)?;
     let (config, method, preset, provenance) = header(path, &bytes)?;
     let mut model = MethodModel::init(&config, method, device);
-    let mut store = SafetensorsStore::from_bytes(Some(bytes)).allow_partial(true).validate(false);
+    // Files are f16 (older ones f32); the networks compute in f32.
+    let mut store = SafetensorsStore::from_bytes(Some(bytes))
+        .allow_partial(true)
+        .validate(false)
+        .with_from_adapter(FloatCastAdapter::to(DType::F32));
     let result = model
         .load_from(&mut store)
         .map_err(|e| WeightsError::Format { path: path.to_path_buf(), message: e.to_string() })?;
@@ -261,11 +271,13 @@ mod tests {
         dir.join("w.safetensors")
     }
 
-    /// Save then load gives bit-identical outputs for every method, and the metadata survives.
-    /// The loaded model is built from a different seed first, so outputs can only agree if every
-    /// tensor was really replaced by the file's.
+    /// Save then load gives the model back (outputs equal up to f16 rounding of the weights) for
+    /// every method, and the metadata survives. The loaded model is built from a different seed
+    /// first, so outputs can only agree if every tensor was really replaced by the file's.
+    /// A second save/load round trip is exact: f16 → f32 → f16 loses nothing, so shipped weights
+    /// re-saved by a later run do not drift.
     #[test]
-    fn save_load_round_trip_is_exact() {
+    fn save_load_round_trip() {
         let d = crate::cpu_device();
         for m in Method::ALL {
             let cfg = tiny().with_seed(7);
@@ -273,6 +285,11 @@ mod tests {
             let prov = Provenance { command: "test".into(), seed: 7, wall_time_s: 1.5, validation_rel_mse: 0.25, ..Default::default() };
             let path = temp(m.name());
             save(&path, &model, &cfg, "tiny", &prov).unwrap();
+            let bytes = std::fs::read(&path).unwrap();
+            let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+            for (name, view) in st.tensors() {
+                assert_eq!(view.dtype(), safetensors::Dtype::F16, "{m}: {name}");
+            }
             let loaded = load(&path, &d).unwrap();
             assert_eq!(loaded.method, m);
             assert_eq!(loaded.preset, "tiny");
@@ -280,10 +297,19 @@ mod tests {
             assert_eq!(loaded.config.seed, 7);
             let a = to_vec(model.forward(inputs(3, &d)).radiance);
             let b = to_vec(loaded.model.forward(inputs(3, &d)).radiance);
-            assert_eq!(a, b, "{m}");
-            // A fresh model of another seed differs, so the equality above is not vacuous.
-            let other = MethodModel::init(&tiny().with_seed(8), m, &d);
-            assert_ne!(a, to_vec(other.forward(inputs(3, &d)).radiance), "{m}");
+            // Each weight moves by at most 2⁻¹¹ relative; through a few layers and a softmax
+            // that stays well under 1 % of the output scale. A missing or garbled tensor moves
+            // outputs by their own size.
+            let scale = a.iter().fold(0f64, |s, v| s.max(v.abs()));
+            let err = a.iter().zip(&b).fold(0f64, |s, (x, y)| s.max((x - y).abs()));
+            assert!(err <= 1e-2 * scale, "{m}: max error {err} vs scale {scale}");
+            save(&path, &loaded.model, &cfg, "tiny", &prov).unwrap();
+            let again = load(&path, &d).unwrap();
+            assert_eq!(b, to_vec(again.model.forward(inputs(3, &d)).radiance), "{m}: second round trip");
+            // A fresh model of another seed differs by far more than the tolerance above.
+            let other = to_vec(MethodModel::init(&tiny().with_seed(8), m, &d).forward(inputs(3, &d)).radiance);
+            let far = a.iter().zip(&other).fold(0f64, |s, (x, y)| s.max((x - y).abs()));
+            assert!(far > 1e-1 * scale, "{m}: another seed differs by only {far}");
             std::fs::remove_dir_all(path.parent().unwrap()).ok();
         }
     }
