@@ -21,7 +21,7 @@ pub struct DatasetArgs {
     pub scenes: String,
     /// Training shots per scene (the default keeps generation under an hour on 2 cores,
     /// docs/dataset.md).
-    #[arg(long, default_value_t = 6)]
+    #[arg(long, default_value_t = 4)]
     pub shots: u32,
     /// Noisy sample counts; each is a prefix of the largest (same seed, same streams).
     #[arg(long, value_delimiter = ',', default_value = "2,4,8")]
