@@ -427,14 +427,14 @@ pub fn write_pictures(dir: &Path, p: &PictureData) -> Result<()> {
     sheet.save(&images_png)?;
 
     let mut sheet = Sheet::new(ordered.len() + 1, tile);
-    for (k, (_, label, img, _)) in ordered.iter().enumerate() {
+    for (k, (_, label, img, rel)) in ordered.iter().enumerate() {
         let t = tonemapped(img);
         let err: Vec<f64> = t
             .iter()
             .zip(&reference)
             .map(|(x, y)| (0..3).map(|c| (x[c] - y[c]).powi(2) / (y[c] * y[c] + metrics::REL_MSE_EPS)).sum::<f64>() / 3.0)
             .collect();
-        sheet.put(k, &crop_map(&err, w, h, inferno_log), label, "error");
+        sheet.put(k, &crop_map(&err, w, h, inferno_log), label, &format!("relMSE {rel:.4}"));
     }
     sheet.put(ordered.len(), &colour_bar(tile, |t| inferno_log(10f64.powf(4.0 * t - 4.0))), "scale", "1E-4 to 1");
     sheet.save(&errors_png)?;
