@@ -55,9 +55,9 @@ pub struct EvalArgs {
     #[arg(long)]
     pub breakdown_scene: Option<String>,
     /// Test scenes shown in pictures (noisy / G / P / both / guided / reference, error and W_G
-    /// maps); empty for none.
-    #[arg(long, default_value = "cornell-box,glass-still-life", value_delimiter = ',')]
-    pub pictures: Vec<String>,
+    /// maps), or `none` [default: those of cornell-box, glass-still-life that --scenes lists].
+    #[arg(long, value_delimiter = ',')]
+    pub pictures: Option<Vec<String>>,
     /// Samples per pixel of the pictures.
     #[arg(long, default_value = "2,32", value_delimiter = ',')]
     pub picture_spp: Vec<u32>,
@@ -339,6 +339,16 @@ pub fn picture_paths(dir: &Path, scene: &str, spp: u32) -> [PathBuf; 3] {
     ["images", "errors", "weights"].map(|k| dir.join(format!("{scene}-{spp}spp-{k}.png")))
 }
 
+pub const DEFAULT_PICTURES: [&str; 2] = ["cornell-box", "glass-still-life"];
+
+/// The picture scenes: as given (checked later against the list), or the defaults the list has.
+pub fn picture_scenes(a: &EvalArgs, scenes: &[TestScene]) -> Vec<String> {
+    match &a.pictures {
+        Some(p) => p.iter().map(|s| s.trim().to_string()).filter(|s| !s.is_empty() && s != "none").collect(),
+        None => DEFAULT_PICTURES.iter().filter(|d| scenes.iter().any(|s| s.name == **d)).map(|d| d.to_string()).collect(),
+    }
+}
+
 pub fn png_dir(out: &Path) -> PathBuf {
     let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "results".into());
     out.with_file_name(stem)
@@ -355,7 +365,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
     }
     let scenes = scenes(&a.scenes)?;
     let methods = methods(&a)?;
-    let pictures: Vec<String> = a.pictures.iter().map(|s| s.trim().to_string()).filter(|s| !s.is_empty() && s != "none").collect();
+    let pictures = picture_scenes(&a, &scenes);
     for p in &pictures {
         if !scenes.iter().any(|s| &s.name == p) {
             bail!("--pictures {p}: not a scene of {}", a.scenes.display());

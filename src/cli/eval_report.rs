@@ -291,7 +291,7 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
     }
 
     // Pictures.
-    let pics: Vec<&str> = a.pictures.iter().map(|s| s.trim()).filter(|s| !s.is_empty() && *s != "none").collect();
+    let pics = eval::picture_scenes(a, &o.scenes);
     if !pics.is_empty() {
         writeln!(w, "## Pictures\n")?;
         writeln!(
@@ -300,7 +300,7 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
              Error maps: per-pixel relMSE (mean over channels), log colour scale from 10⁻⁴ (dark) to 1 (yellow). W_G: the share of the \
              G-buffer denoiser per pixel in the guided model (viridis, 0 dark … 1 yellow), diffuse and specular branch (the paper's Fig. 5–7).\n"
         )?;
-        for p in pics {
+        for p in &pics {
             let mut ps = a.picture_spp.clone();
             ps.sort_unstable();
             ps.dedup();
