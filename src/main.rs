@@ -34,6 +34,9 @@ enum Command {
     Train(cli::train::TrainArgs),
     /// Denoise a frame written by `render --aovs` (G, P, both-buffers or guided model).
     Denoise(cli::denoise::DenoiseArgs),
+    /// Regenerate docs/results.md: every method on the test scenes at each spp — error tables,
+    /// error-vs-spp and error-vs-time plots, runtime breakdown, pictures (resumable).
+    Eval(cli::eval::EvalArgs),
 }
 
 fn main() {
@@ -51,6 +54,7 @@ fn main() {
         Command::Reference(a) => cli::reference::run(a),
         Command::Train(a) => cli::train::run(a),
         Command::Denoise(a) => cli::denoise::run(a),
+        Command::Eval(a) => cli::eval::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -28,10 +28,11 @@ use std::time::Instant;
 
 use burn::tensor::{Device, Tensor};
 
-use crate::kpcn::channels::{COLOUR_BLOCK, G_BLOCK};
-use crate::method::{Method, MethodModel};
-use crate::model::DenoiserConfig;
-use crate::preprocess::{PreparedImage, DESCRIPTOR_CHANNELS};
+use crate::kpcn::channels::{COLOUR_BLOCK, G_ALBEDO, G_BLOCK};
+use crate::kpcn::recombine;
+use crate::method::{BranchNets, BranchResult, Method, MethodModel, MethodOutput};
+use crate::model::{BranchInput, DenoiserConfig};
+use crate::preprocess::{InputTensors, PreparedImage, DESCRIPTOR_CHANNELS};
 
 /// Largest radiance written. Nothing physical comes near; it keeps squared errors of the output
 /// finite in f32 and stands in for +Inf.
@@ -76,8 +77,16 @@ pub struct Timings {
     pub tile: usize,
     /// Cutting windows out of the prepared image and building tensors.
     pub gather_s: f64,
-    /// Network forward passes (including reading results back).
+    /// Network forward passes (including reading results back); the sum of the four below.
     pub forward_s: f64,
+    /// D_G columns of both branches (KPCN on G-buffers).
+    pub d_g_s: f64,
+    /// Path-manifold modules plus the D_P columns (method p, guided) or the G+P columns (both).
+    pub d_p_s: f64,
+    /// E and the blend (guided), and the recombination of the two branches (every method).
+    pub e_s: f64,
+    /// Reading the results back into host memory.
+    pub readback_s: f64,
     /// Everything.
     pub total_s: f64,
     pub windows: usize,
@@ -270,7 +279,8 @@ pub fn denoise(
         drop(wins);
         timings.gather_s += tg.elapsed().as_secs_f64();
         let tf = Instant::now();
-        let out = model.forward(input);
+        let out = timed_forward(model, input, &mut timings);
+        let tr = Instant::now();
         let rad = to_vec(out.radiance);
         let weights = if guided {
             let take = |t: Option<Tensor<4>>| t.map(|t| to_vec(t.narrow(1, 0, 1)));
@@ -278,6 +288,7 @@ pub fn denoise(
         } else {
             None
         };
+        timings.readback_s += tr.elapsed().as_secs_f64();
         timings.forward_s += tf.elapsed().as_secs_f64();
         // Output map of a window: (ww − 2m) × (wh − 2m); its pixel (0,0) is output coordinate
         // (x0, y0) (padded x0 + m).
@@ -312,6 +323,56 @@ pub fn denoise(
     });
     timings.total_s = t0.elapsed().as_secs_f64();
     Ok(Denoised { width: w, height: h, radiance, weights_g, timings })
+}
+
+/// [`MethodModel::forward`] with the time of each network added to `t` (the runtime breakdown
+/// of the paper's Table 1). The same operations in the same order, so the same numbers (tested);
+/// the CPU backend executes eagerly, so the wall time around a call is the time of that network.
+fn timed_forward(model: &MethodModel, input: InputTensors, t: &mut Timings) -> MethodOutput {
+    let albedo = input.diffuse.g_block.clone().narrow(1, G_ALBEDO, 3);
+    let diffuse = timed_branch(&model.diffuse, input.diffuse, input.path_weight.clone(), t);
+    let specular = timed_branch(&model.specular, input.specular, input.path_weight, t);
+    let te = Instant::now();
+    let radiance = recombine(diffuse.output.clone(), specular.output.clone(), albedo);
+    t.e_s += te.elapsed().as_secs_f64();
+    MethodOutput { diffuse, specular, radiance }
+}
+
+fn timed_branch(nets: &BranchNets, input: BranchInput, path_weight: Tensor<4>, t: &mut Timings) -> BranchResult {
+    // Only networks that exist are booked, so a method's breakdown shows 0 for the ones it lacks.
+    let lap = |start: Instant, present: bool, acc: &mut f64| {
+        if present {
+            *acc += start.elapsed().as_secs_f64()
+        }
+    };
+    let tp = Instant::now();
+    let path = nets.path.as_ref().map(|p| p.forward(input.descriptors.clone()));
+    let pbuf = path.as_ref().map(|p| p.pixel_buffer());
+    lap(tp, nets.path.is_some(), &mut t.d_p_s);
+    let tg = Instant::now();
+    let i_g = nets.d_g.as_ref().map(|d| d.forward(Tensor::cat(vec![input.colour.clone(), input.g_block.clone()], 1)));
+    lap(tg, nets.d_g.is_some(), &mut t.d_g_s);
+    let tp = Instant::now();
+    let i_p = nets.d_p.as_ref().zip(pbuf.clone()).map(|(d, pb)| d.forward(Tensor::cat(vec![input.colour.clone(), pb], 1)));
+    lap(tp, nets.d_p.is_some(), &mut t.d_p_s);
+    if let (Some(d), Some(pb)) = (&nets.d_gp, pbuf.clone()) {
+        let tp = Instant::now();
+        let output = d.forward(Tensor::cat(vec![input.colour, input.g_block, path_weight, pb], 1));
+        lap(tp, true, &mut t.d_p_s);
+        return BranchResult { output, i_g: None, i_p: None, weights: None, path };
+    }
+    match (&nets.e, i_g, i_p, pbuf) {
+        (Some(e), Some(g), Some(p), Some(pb)) => {
+            let te = Instant::now();
+            let blend = e.forward(g.clone(), p.clone(), input.g_block, pb);
+            lap(te, true, &mut t.e_s);
+            BranchResult { output: blend.output, i_g: Some(g), i_p: Some(p), weights: Some(blend.weights), path }
+        }
+        (None, Some(g), None, _) => BranchResult { output: g.clone(), i_g: Some(g), i_p: None, weights: None, path },
+        (None, None, Some(p), _) => BranchResult { output: p.clone(), i_g: None, i_p: Some(p), weights: None, path },
+        // Unreachable: `denoise` checked `model.method()` first, which rules out other sets.
+        _ => nets.forward(input, path_weight),
+    }
 }
 
 #[cfg(test)]
@@ -389,6 +450,25 @@ mod tests {
             assert_eq!(whole.weights_g.is_some(), m == Method::Guided);
             // Passthrough pixels keep the noisy value.
             assert_eq!(&tiled.radiance[33..36], &noisy[33..36]);
+        }
+    }
+
+    /// The per-network timed forward computes exactly what `MethodModel::forward` computes, for
+    /// every method, and books time only to the networks the method has.
+    #[test]
+    fn timed_forward_matches_forward() {
+        let d = crate::cpu_device();
+        let cfg = tiny();
+        let img = random_image(30, 26, 2, 9);
+        for m in Method::ALL {
+            let model = MethodModel::init(&cfg, m, &d);
+            let mut t = Timings::default();
+            let a = to_vec(timed_forward(&model, PreparedImage::to_tensors(&[&img], &d), &mut t).radiance);
+            let b = to_vec(model.forward(PreparedImage::to_tensors(&[&img], &d)).radiance);
+            assert_eq!(a, b, "{m}");
+            assert_eq!(t.d_g_s > 0.0, matches!(m, Method::G | Method::Guided), "{m} {t:?}");
+            assert_eq!(t.d_p_s > 0.0, m != Method::G, "{m} {t:?}");
+            assert!(t.e_s > 0.0, "{m} {t:?}");
         }
     }
 

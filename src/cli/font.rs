@@ -1,7 +1,7 @@
 //! A 3×5 pixel font for labelling contact sheets and plots without shipping a font file.
 
-/// Each glyph is 5 rows of 3 bits (MSB = left column), top row first.
-fn glyph(c: char) -> [u8; 5] {
+/// Each glyph is 5 rows of 3 bits (MSB = left column), top row first. Letters have one case.
+pub fn glyph(c: char) -> [u8; 5] {
     match c.to_ascii_uppercase() {
         'A' => [2, 5, 7, 5, 5],
         'B' => [6, 5, 6, 5, 6],
@@ -44,6 +44,19 @@ fn glyph(c: char) -> [u8; 5] {
         '_' => [0, 0, 0, 0, 7],
         '/' => [1, 1, 2, 4, 4],
         ':' => [0, 2, 0, 2, 0],
+        '(' => [1, 2, 2, 2, 1],
+        ')' => [4, 2, 2, 2, 4],
+        '=' => [0, 7, 0, 7, 0],
+        '+' => [0, 2, 7, 2, 0],
+        ',' => [0, 0, 0, 2, 4],
+        '%' => [5, 1, 2, 4, 5],
+        '<' => [1, 2, 4, 2, 1],
+        '>' => [4, 2, 1, 2, 4],
+        '*' => [0, 5, 2, 5, 0],
+        '^' => [2, 5, 0, 0, 0],
+        '²' => [6, 2, 4, 6, 0],
+        '−' => [0, 0, 7, 0, 0],
+        '×' => [0, 5, 2, 5, 0],
         _ => [0; 5],
     }
 }

@@ -7,3 +7,6 @@ pub mod dataset;
 pub mod reference;
 pub mod train;
 pub mod denoise;
+pub mod eval;
+pub mod eval_plot;
+pub mod eval_report;

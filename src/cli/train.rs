@@ -415,7 +415,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
 }
 
 /// `git rev-parse HEAD` (+ "-dirty" with local changes), empty outside a repository.
-fn git_commit() -> String {
+pub fn git_commit() -> String {
     let run = |args: &[&str]| std::process::Command::new("git").args(args).output().ok().filter(|o| o.status.success()).map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
     match run(&["rev-parse", "HEAD"]) {
         Some(h) => {
@@ -427,7 +427,7 @@ fn git_commit() -> String {
 }
 
 /// Now as ISO 8601 UTC (civil-from-days, Howard Hinnant's algorithm).
-fn iso_date_utc() -> String {
+pub fn iso_date_utc() -> String {
     let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs() as i64).unwrap_or(0);
     let (days, rem) = (secs.div_euclid(86400), secs.rem_euclid(86400));
     let z = days + 719_468;

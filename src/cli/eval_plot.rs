@@ -1,0 +1,258 @@
+//! Plots of `pixguide eval`: plotters drawing into an RGB buffer through a backend whose text is
+//! the built-in bitmap font (src/cli/font.rs). No font file, font-kit, fontconfig or freetype is
+//! involved, so the plots come out the same on a fresh machine with no system fonts.
+
+use super::font;
+use anyhow::{anyhow, Result};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters_backend::text_anchor::{HPos, VPos};
+use plotters_backend::{BackendColor, BackendCoord, BackendTextStyle, DrawingErrorKind, FontTransform};
+use std::path::Path;
+
+/// An RGB8 canvas for plotters; every primitive but text uses plotters' pixel fallbacks.
+pub struct Canvas<'a> {
+    px: &'a mut [u8],
+    w: u32,
+    h: u32,
+}
+
+/// Bitmap-font scale for a requested text size in pixels (the glyphs are 5 pixels tall).
+fn scale_for(size: f64) -> i32 {
+    ((size / 7.0).round() as i32).max(1)
+}
+
+/// Width and height of `text` at glyph scale `s` (3 pixels per glyph + 1 of spacing).
+fn text_box(text: &str, s: i32) -> (i32, i32) {
+    let n = text.chars().count() as i32;
+    ((4 * n - 1).max(0) * s, 5 * s)
+}
+
+impl DrawingBackend for Canvas<'_> {
+    type ErrorType = std::io::Error;
+
+    fn get_size(&self) -> (u32, u32) {
+        (self.w, self.h)
+    }
+
+    fn ensure_prepared(&mut self) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        Ok(())
+    }
+
+    fn present(&mut self) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        Ok(())
+    }
+
+    fn draw_pixel(&mut self, (x, y): BackendCoord, c: BackendColor) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        if x < 0 || y < 0 || x >= self.w as i32 || y >= self.h as i32 || c.alpha <= 0.0 {
+            return Ok(());
+        }
+        let o = ((y as u32 * self.w + x as u32) * 3) as usize;
+        let a = c.alpha.min(1.0);
+        for (k, v) in [c.rgb.0, c.rgb.1, c.rgb.2].into_iter().enumerate() {
+            self.px[o + k] = (self.px[o + k] as f64 * (1.0 - a) + v as f64 * a).round() as u8;
+        }
+        Ok(())
+    }
+
+    fn draw_text<S: BackendTextStyle>(&mut self, text: &str, style: &S, pos: BackendCoord) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        let s = scale_for(style.size());
+        let (tw, th) = text_box(text, s);
+        let anchor = style.anchor();
+        let dx = match anchor.h_pos {
+            HPos::Left => 0,
+            HPos::Center => -tw / 2,
+            HPos::Right => -tw,
+        };
+        let dy = match anchor.v_pos {
+            VPos::Top => 0,
+            VPos::Center => -th / 2,
+            VPos::Bottom => -th,
+        };
+        let trans: FontTransform = style.transform();
+        let color = style.color();
+        for (k, ch) in text.chars().enumerate() {
+            for (row, bits) in font::glyph(ch).iter().enumerate() {
+                for col in 0..3 {
+                    if bits & (4 >> col) == 0 {
+                        continue;
+                    }
+                    for sy in 0..s {
+                        for sx in 0..s {
+                            let gx = k as i32 * 4 * s + col * s + sx + dx;
+                            let gy = row as i32 * s + sy + dy;
+                            let (x, y) = trans.transform(gx, gy);
+                            self.draw_pixel((pos.0 + x, pos.1 + y), color)?;
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn estimate_text_size<S: BackendTextStyle>(&self, text: &str, style: &S) -> Result<(u32, u32), DrawingErrorKind<Self::ErrorType>> {
+        let (w, h) = text_box(text, scale_for(style.size()));
+        Ok((w as u32, h as u32))
+    }
+}
+
+/// One curve: label, colour index and (x, y) points (non-positive values are left out: the axes
+/// are logarithmic).
+pub struct Curve {
+    pub label: String,
+    pub colour: usize,
+    pub points: Vec<(f64, f64)>,
+}
+
+/// Distinct colours for up to 10 curves (Tableau 10).
+pub fn colour(i: usize) -> RGBColor {
+    const C: [(u8, u8, u8); 10] = [
+        (31, 119, 180),
+        (255, 127, 14),
+        (44, 160, 44),
+        (214, 39, 40),
+        (148, 103, 189),
+        (140, 86, 75),
+        (227, 119, 194),
+        (127, 127, 127),
+        (188, 189, 34),
+        (23, 190, 207),
+    ];
+    let (r, g, b) = C[i % C.len()];
+    RGBColor(r, g, b)
+}
+
+/// Log range covering `v` with a margin of 20 % on each side (a decade if all equal or empty).
+fn log_range(v: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    for x in v.filter(|x| x.is_finite() && *x > 0.0) {
+        lo = lo.min(x);
+        hi = hi.max(x);
+    }
+    if !lo.is_finite() {
+        return (0.1, 1.0);
+    }
+    if hi / lo < 1.5 {
+        return (lo / 2.0, hi * 2.0);
+    }
+    (lo / 1.2, hi * 1.2)
+}
+
+/// Tick values inside [lo, hi]: the 1-2-5 sequence of each decade, or a finer one if that
+/// leaves fewer than three (plotters' own log ticks skip narrow ranges entirely).
+fn ticks(lo: f64, hi: f64) -> Vec<f64> {
+    for steps in [&[1.0, 2.0, 5.0][..], &[1.0, 1.5, 2.0, 3.0, 5.0, 7.0][..], &[1.0, 1.2, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0][..]] {
+        let mut out = Vec::new();
+        let mut e = lo.log10().floor() as i32;
+        while 10f64.powi(e) <= hi && out.len() < 40 {
+            for &k in steps {
+                let v = k * 10f64.powi(e);
+                if v >= lo && v <= hi {
+                    out.push(v);
+                }
+            }
+            e += 1;
+        }
+        if out.len() >= 3 || steps.len() > 6 {
+            return out;
+        }
+    }
+    Vec::new()
+}
+
+fn tick(v: f64) -> String {
+    if v >= 100.0 {
+        format!("{v:.0}")
+    } else if v >= 1.0 {
+        format!("{v:.1}")
+    } else if v >= 0.01 {
+        format!("{v:.2}")
+    } else {
+        format!("{v:.0e}")
+    }
+}
+
+fn panel(area: &DrawingArea<Canvas<'_>, Shift>, title: &str, x_label: &str, y_label: &str, curves: &[Curve], x_keys: Option<Vec<f64>>) -> Result<()> {
+    let (x0, x1) = log_range(curves.iter().flat_map(|c| c.points.iter().map(|p| p.0)));
+    let (y0, y1) = log_range(curves.iter().flat_map(|c| c.points.iter().map(|p| p.1)));
+    let x_keys = x_keys.unwrap_or_else(|| ticks(x0, x1));
+    let err = |e: DrawingAreaErrorKind<std::io::Error>| anyhow!("plot: {e}");
+    let mut chart = ChartBuilder::on(area)
+        .caption(title, ("sans-serif", 14))
+        .margin(10)
+        .x_label_area_size(42)
+        .y_label_area_size(56)
+        .build_cartesian_2d((x0..x1).log_scale().with_key_points(x_keys), (y0..y1).log_scale().with_key_points(ticks(y0, y1)))
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_label)
+        .y_desc(y_label)
+        .label_style(("sans-serif", 12))
+        .axis_desc_style(("sans-serif", 14))
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| tick(*v))
+        .light_line_style(RGBColor(235, 235, 235))
+        .bold_line_style(RGBColor(200, 200, 200))
+        .draw()
+        .map_err(err)?;
+    for c in curves {
+        let pts: Vec<(f64, f64)> = c.points.iter().copied().filter(|(x, y)| *x > 0.0 && *y > 0.0 && x.is_finite() && y.is_finite()).collect();
+        if pts.is_empty() {
+            continue;
+        }
+        let col = colour(c.colour);
+        chart
+            .draw_series(LineSeries::new(pts.clone(), col.stroke_width(2)))
+            .map_err(err)?
+            .label(c.label.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], col.stroke_width(2)));
+        chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, col.filled()))).map_err(err)?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font(("sans-serif", 12))
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(160, 160, 160))
+        .draw()
+        .map_err(err)?;
+    Ok(())
+}
+
+/// Two log-log panels side by side (left: relMSE, right: 1 − SSIM) written as a PNG.
+/// `x_keys`: the x ticks (e.g. the spp values), or None for a 1-2-5 sequence.
+pub fn write_pair(path: &Path, x_label: &str, x_keys: Option<Vec<f64>>, left: (&str, &[Curve]), right: (&str, &[Curve])) -> Result<()> {
+    let (w, h) = (1100u32, 440u32);
+    let mut px = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = DrawingArea::from(Canvas { px: &mut px, w, h });
+        let halves = root.split_evenly((1, 2));
+        panel(&halves[0], left.0, x_label, left.0, left.1, x_keys.clone())?;
+        panel(&halves[1], right.0, x_label, right.0, right.1, x_keys)?;
+    }
+    super::denoise::ensure_parent(path)?;
+    renderer::film::png::write_rgb8(path, w, h, px)?;
+    Ok(())
+}
+
+/// Text in colour `rgb` at glyph scale `s` into an RGB8 buffer `width` pixels wide.
+pub fn text(px: &mut [u8], width: u32, x: u32, y: u32, s: u32, rgb: [u8; 3], t: &str) {
+    let mut c = Canvas { h: px.len() as u32 / 3 / width.max(1), px, w: width };
+    for (k, ch) in t.chars().enumerate() {
+        for (row, bits) in font::glyph(ch).iter().enumerate() {
+            for col in 0..3u32 {
+                if bits & (4 >> col) == 0 {
+                    continue;
+                }
+                for sy in 0..s {
+                    for sx in 0..s {
+                        let p = ((x + k as u32 * 4 * s + col * s + sx) as i32, (y + row as u32 * s + sy) as i32);
+                        let _ = c.draw_pixel(p, BackendColor { alpha: 1.0, rgb: (rgb[0], rgb[1], rgb[2]) });
+                    }
+                }
+            }
+        }
+    }
+}
