@@ -10,19 +10,27 @@
 //! guidance features real. (The forward-difference gradient channels are mirrored as stored, so
 //! their sign flips along the mirrored axis inside the pad; they only steer the kernels there.)
 //!
-//! **Tiles.** The padded image is cut into windows, each giving a `tile × tile` block of output.
-//! A window carries [`context`] pixels of input around its block: the KPCN margin plus the
-//! receptive radius of the path-manifold module (whose U-Net uses same-padded convolutions,
-//! pooling and upsampling) and of E (same-padded convolutions), so every kept output pixel sees
-//! exactly the input it would see if the whole padded image were one window. The U-Net's 2×2
-//! pooling grid is kept in phase with the whole image by aligning window origins and sizes to
-//! 2^(levels−1) pixels. Windows at the edge are shifted inward (never clipped) so that all windows
-//! have one size and can be batched; one that reaches the padded image's edge sees the same zero
-//! padding there that the whole-image run sees. Result: tiled output = untiled output up to f32
-//! rounding of differently-blocked convolutions (tested).
+//! **Path-manifold module first, per pixel.** For models with one (p, both, guided), the
+//! per-pixel P-buffers (f_P, v_P of each branch) are computed for the whole padded image before
+//! any tile, in [`PathNet`]'s stages: the per-sample embedding over chunks of pixels (pointwise,
+//! so no overlap), its per-pixel mean mirror-padded like the image, the U-Net over windows of
+//! the padded mean map carrying [`pathnet_radius`] of context (window origins and sizes aligned
+//! to 2^(levels−1) pixels so the 2×2 pooling grid stays in phase with the whole image), then the
+//! per-sample head over chunks again (the embedding is recomputed rather than stored: storing it
+//! would cost spp × E floats per pixel). Each sample is thus embedded twice and passed through
+//! the head once, whatever the tile size — before, every overlapping window recomputed them.
 //!
-//! Memory: only one batch of windows is ever a tensor; the prepared image itself (descriptors
-//! included) stays planar on the CPU.
+//! **Tiles.** The padded image is then cut into windows, each giving a `tile × tile` block of
+//! output. A window carries [`context`] pixels of input around its block: the KPCN margin plus
+//! the receptive radius of E (same-padded convolutions); the P-buffers are cut from the
+//! precomputed padded maps. Windows at the edge are shifted inward (never clipped) so that all
+//! windows have one size and can be batched; one that reaches the padded image's edge sees the
+//! same zero padding there that the whole-image run sees. Result: tiled output = the model's
+//! forward on the whole padded image up to f32 rounding of differently-blocked arithmetic
+//! (tested).
+//!
+//! Memory: only one chunk of samples, one U-Net window or one batch of windows is ever a tensor;
+//! the prepared image itself (descriptors included) and the per-pixel maps stay planar on the CPU.
 
 use std::time::Instant;
 
@@ -32,6 +40,7 @@ use crate::kpcn::channels::{COLOUR_BLOCK, G_ALBEDO, G_BLOCK};
 use crate::kpcn::recombine;
 use crate::method::{BranchNets, BranchResult, Method, MethodModel, MethodOutput};
 use crate::model::{BranchInput, DenoiserConfig};
+use crate::pathnet::PathNet;
 use crate::preprocess::{InputTensors, PreparedImage, DESCRIPTOR_CHANNELS};
 
 /// Largest radiance written. Nothing physical comes near; it keeps squared errors of the output
@@ -77,12 +86,14 @@ pub struct Timings {
     pub tile: usize,
     /// Cutting windows out of the prepared image and building tensors.
     pub gather_s: f64,
-    /// Network forward passes (including reading results back); the sum of the four below.
+    /// Network forward passes (including reading results back); the sum of d_g, d_p, e, readback.
     pub forward_s: f64,
     /// D_G columns of both branches (KPCN on G-buffers).
     pub d_g_s: f64,
     /// Path-manifold modules plus the D_P columns (method p, guided) or the G+P columns (both).
     pub d_p_s: f64,
+    /// Of `d_p_s`, the path-manifold modules alone (both branches, whole image).
+    pub path_s: f64,
     /// E and the blend (guided), and the recombination of the two branches (every method).
     pub e_s: f64,
     /// Reading the results back into host memory.
@@ -126,14 +137,16 @@ pub fn pathnet_radius(config: &DenoiserConfig) -> usize {
     total
 }
 
-/// Input context (pixels, per side) that an output pixel of `method` depends on.
+/// Input context (pixels, per side) of the tiled KPCN/E pass: the KPCN margin plus E's
+/// receptive radius. The path-manifold module's U-Net is not included: its output is computed
+/// for the whole image beforehand, with its own context ([`pathnet_radius`]).
 pub fn context(config: &DenoiserConfig, method: Method) -> usize {
-    let path = if method.needs_descriptors() { pathnet_radius(config) } else { 0 };
     let e = if method == Method::Guided { config.ensemble.depth * (config.ensemble.conv_kernel / 2) } else { 0 };
-    config.margin() + path + e
+    config.margin() + e
 }
 
-/// Alignment of window origins and sizes that keeps the U-Net's pooling grid in phase.
+/// Alignment of the padded image and of U-Net window origins and sizes that keeps the U-Net's
+/// pooling grid in phase with the whole image.
 pub fn alignment(config: &DenoiserConfig, method: Method) -> usize {
     if method.needs_descriptors() {
         1 << (config.pathnet.unet_widths.len().max(1) - 1)
@@ -142,28 +155,29 @@ pub fn alignment(config: &DenoiserConfig, method: Method) -> usize {
     }
 }
 
-/// Window side for an output tile of side `tile`.
+/// Window side of the KPCN/E pass for an output tile of side `tile`.
 pub fn window_side(config: &DenoiserConfig, method: Method, tile: usize) -> usize {
+    tile + 2 * context(config, method)
+}
+
+/// Window side of the U-Net pass (path-manifold models) for a block of side `tile`.
+pub fn unet_window_side(config: &DenoiserConfig, method: Method, tile: usize) -> usize {
     let a = alignment(config, method);
-    align_up(tile + 2 * context(config, method) + a - 1, a)
+    align_up(tile + 2 * pathnet_radius(config) + a - 1, a)
 }
 
-/// Per-sample activations of one window (samples × window pixels) allowed by [`auto_tile`]: the
-/// cost of a 256-pixel tile of the default guided model at 8 spp, measured at ≈ 0.4 GiB of heap
-/// (docs/denoiser-design.md).
-pub const AUTO_SAMPLE_PIXELS: usize = 8 * 344 * 344;
-
-/// The largest of 256, 192, 128, 96, 64 whose window keeps the path-manifold module's
-/// per-sample activations within [`AUTO_SAMPLE_PIXELS`] at `spp` (models without it: 256). Large
-/// tiles waste less work on context (a 128 tile of the default guided model computes a 216²
-/// window, 2.8× its output; a 256 tile 1.8×).
-pub fn auto_tile(config: &DenoiserConfig, method: Method, spp: usize) -> usize {
-    let s = if method.needs_descriptors() { spp.max(1) } else { 1 };
-    [256, 192, 128, 96, 64]
-        .into_iter()
-        .find(|&t| s * window_side(config, method, t).pow(2) <= AUTO_SAMPLE_PIXELS)
-        .unwrap_or(64)
+/// Default output tile: 256 (a 280² window of the default guided model, 1.2× its output).
+/// Windows hold per-pixel inputs only, so the sample count no longer matters here; the
+/// per-sample stages run in chunks of [`CHUNK_SAMPLE_PIXELS`].
+pub fn auto_tile(_config: &DenoiserConfig, _method: Method, _spp: usize) -> usize {
+    256
 }
+
+/// Samples × pixels per chunk of the per-sample stages of the path-manifold module. Each
+/// sample-pixel holds ~36 + 3·E + 2·(E + G) + hidden + 12 floats of activations (≈ 1 KB for
+/// the default preset), so a chunk is ~130 MB whatever the image size and spp; large enough
+/// that the 1×1 convolutions run as big matrix products.
+pub const CHUNK_SAMPLE_PIXELS: usize = 1 << 17;
 
 /// Mirror index into 0..n for any integer (period 2n−2).
 fn reflect(i: isize, n: usize) -> usize {
@@ -181,7 +195,8 @@ fn align_up(x: usize, a: usize) -> usize {
 
 /// The `w × h` window whose top-left corner is at padded coordinates (x0, y0); padded
 /// coordinate p maps to image coordinate reflect(p − pad).
-fn window(img: &PreparedImage, pad: usize, x0: usize, y0: usize, w: usize, h: usize) -> PreparedImage {
+/// Descriptors are cut only if `descriptors` (the tiled pass reads precomputed P-buffers).
+fn window(img: &PreparedImage, pad: usize, x0: usize, y0: usize, w: usize, h: usize, descriptors: bool) -> PreparedImage {
     let cols: Vec<usize> = (0..w).map(|x| reflect((x0 + x) as isize - pad as isize, img.width)).collect();
     let rows: Vec<usize> = (0..h).map(|y| reflect((y0 + y) as isize - pad as isize, img.height)).collect();
     let n = img.width * img.height;
@@ -204,7 +219,7 @@ fn window(img: &PreparedImage, pad: usize, x0: usize, y0: usize, w: usize, h: us
         specular: cut(&img.specular, COLOUR_BLOCK),
         g_block: cut(&img.g_block, G_BLOCK),
         path_weight: cut(&img.path_weight, 1),
-        descriptors: img.descriptors.as_ref().map(|d| cut(d, img.spp * DESCRIPTOR_CHANNELS)),
+        descriptors: img.descriptors.as_ref().filter(|_| descriptors).map(|d| cut(d, img.spp * DESCRIPTOR_CHANNELS)),
         passthrough: Vec::new(),
     }
 }
@@ -221,6 +236,131 @@ fn clean(x: f32) -> f32 {
     }
 }
 
+/// Where a window of `size` pixels goes so that it contains the block starting at padded
+/// coordinate `p` plus `c` pixels of context, with its origin a multiple of `a` and the window
+/// inside `0..padded` (shifted inward at the edge, never clipped).
+fn window_origin(p: usize, c: usize, a: usize, size: usize, padded: usize) -> usize {
+    (p.saturating_sub(c) / a * a).min(padded - size)
+}
+
+/// Planar `[ch, h, w]` map → `[1, ch, wh, ww]` tensor of the window at (x0, y0), for each window.
+fn cut_map(map: &[f32], ch: usize, w: usize, h: usize, origins: &[(usize, usize)], ww: usize, wh: usize, device: &Device) -> Tensor<4> {
+    let mut data = Vec::with_capacity(origins.len() * ch * ww * wh);
+    for &(x0, y0) in origins {
+        for c in 0..ch {
+            for y in y0..y0 + wh {
+                let row = (c * h + y) * w + x0;
+                data.extend_from_slice(&map[row..row + ww]);
+            }
+        }
+    }
+    Tensor::from_data(burn::tensor::TensorData::new(data, [origins.len(), ch, wh, ww]), device)
+}
+
+/// One branch's P-buffer [f_P, v_P] `[13, ph, pw]` (planar) on the padded grid: padded pixel
+/// (x, y) is image pixel (reflect(x − m), reflect(y − m)), as in [`window`]. Same arithmetic as
+/// [`PathNet::forward`] on the whole padded image, staged so that memory stays bounded: the
+/// pointwise stages over chunks of `chunk` sample-pixels, the U-Net over `tile` blocks with
+/// `radius` pixels of context in windows of side `side` (see [`unet_window_side`]), aligned to `a`.
+#[allow(clippy::too_many_arguments)]
+fn path_buffer(
+    net: &PathNet,
+    image: &PreparedImage,
+    (m, pw, ph): (usize, usize, usize),
+    (tile, radius, a, side): (usize, usize, usize, usize),
+    chunk: usize,
+    device: &Device,
+) -> Vec<f32> {
+    let (w, h, s) = (image.width, image.height, image.spp.max(1));
+    let desc = image.descriptors.as_deref().unwrap_or(&[]);
+    let n = w * h;
+    let per_chunk = (chunk / s).max(1);
+    // Descriptors of the listed image pixels as `[1, S, 36, 1, len]`.
+    let gather = |pixels: &mut dyn Iterator<Item = usize>| -> Tensor<5> {
+        let idx: Vec<usize> = pixels.collect();
+        let mut data = Vec::with_capacity(s * DESCRIPTOR_CHANNELS * idx.len());
+        for plane in 0..s * DESCRIPTOR_CHANNELS {
+            let p = &desc[plane * n..(plane + 1) * n];
+            data.extend(idx.iter().map(|&i| p[i]));
+        }
+        let len = idx.len();
+        Tensor::from_data(burn::tensor::TensorData::new(data, [1, s, DESCRIPTOR_CHANNELS, 1, len]), device)
+    };
+
+    // Per-pixel mean embedding of the image, then mirror-padded: embedding is pointwise, so the
+    // mean at a mirrored pixel is the mirrored mean.
+    let mut mean: Vec<f32> = Vec::new();
+    let mut ew = 0;
+    for p0 in (0..n).step_by(per_chunk) {
+        let p1 = (p0 + per_chunk).min(n);
+        let e = net.embed(gather(&mut (p0..p1)));
+        let v = to_vec(PathNet::pixel_mean(&e));
+        if mean.is_empty() {
+            ew = v.len() / (p1 - p0);
+            mean = vec![0.0; ew * n];
+        }
+        for c in 0..ew {
+            mean[c * n + p0..c * n + p1].copy_from_slice(&v[c * (p1 - p0)..(c + 1) * (p1 - p0)]);
+        }
+    }
+    let cols: Vec<usize> = (0..pw).map(|x| reflect(x as isize - m as isize, w)).collect();
+    let rows: Vec<usize> = (0..ph).map(|y| reflect(y as isize - m as isize, h)).collect();
+    let np = pw * ph;
+    let mut padded = Vec::with_capacity(ew * np);
+    for c in 0..ew {
+        for &r in &rows {
+            padded.extend(cols.iter().map(|&x| mean[c * n + r * w + x]));
+        }
+    }
+    drop(mean);
+
+    // U-Net over aligned windows of the padded map; each keeps its block.
+    let (uw, uh) = (side.min(pw), side.min(ph));
+    let mut g_map: Vec<f32> = Vec::new();
+    let mut gw = 0;
+    for by in (0..ph).step_by(tile) {
+        for bx in (0..pw).step_by(tile) {
+            let o = (window_origin(bx, radius, a, uw, pw), window_origin(by, radius, a, uh, ph));
+            let g = to_vec(net.unet(cut_map(&padded, ew, pw, ph, &[o], uw, uh, device)));
+            if g_map.is_empty() {
+                gw = g.len() / (uw * uh);
+                g_map = vec![0.0; gw * np];
+            }
+            for c in 0..gw {
+                for y in by..(by + tile).min(ph) {
+                    let (bw, ly) = (tile.min(pw - bx), y - o.1);
+                    let src = (c * uh + ly) * uw + bx - o.0;
+                    g_map[(c * ph + y) * pw + bx..][..bw].copy_from_slice(&g[src..src + bw]);
+                }
+            }
+        }
+    }
+    drop(padded);
+
+    // Head and pooling per chunk of padded pixels, re-embedding their samples.
+    let mut out: Vec<f32> = Vec::new();
+    let mut oc = 0;
+    for p0 in (0..np).step_by(per_chunk) {
+        let p1 = (p0 + per_chunk).min(np);
+        let len = p1 - p0;
+        let e = net.embed(gather(&mut (p0..p1).map(|p| rows[p / pw] * w + cols[p % pw])));
+        let mut gd = Vec::with_capacity(gw * len);
+        for c in 0..gw {
+            gd.extend_from_slice(&g_map[c * np + p0..c * np + p1]);
+        }
+        let g = Tensor::from_data(burn::tensor::TensorData::new(gd, [1, gw, 1, len]), device);
+        let v = to_vec(net.head_pool(e, g).pixel_buffer());
+        if out.is_empty() {
+            oc = v.len() / len;
+            out = vec![0.0; oc * np];
+        }
+        for c in 0..oc {
+            out[c * np + p0..c * np + p1].copy_from_slice(&v[c * len..(c + 1) * len]);
+        }
+    }
+    out
+}
+
 /// Denoises a prepared image. `noisy` is the frame's radiance (interleaved RGB), kept where the
 /// prepared image marks a pixel as passthrough (camera ray hit nothing or an emitter, method.md
 /// §7.3; only known when the frame had descriptors).
@@ -230,6 +370,20 @@ pub fn denoise(
     image: &PreparedImage,
     noisy: &[f32],
     opts: &InferOptions,
+    device: &Device,
+) -> Result<Denoised, InferError> {
+    denoise_chunked(model, config, image, noisy, opts, CHUNK_SAMPLE_PIXELS, device)
+}
+
+/// [`denoise`] with the chunk size of the per-sample stages as a parameter (tests use small
+/// chunks so that chunk boundaries fall inside rows).
+fn denoise_chunked(
+    model: &MethodModel,
+    config: &DenoiserConfig,
+    image: &PreparedImage,
+    noisy: &[f32],
+    opts: &InferOptions,
+    chunk: usize,
     device: &Device,
 ) -> Result<Denoised, InferError> {
     let t0 = Instant::now();
@@ -247,39 +401,53 @@ pub fn denoise(
     let m = config.margin();
     let c = context(config, method);
     let a = alignment(config, method);
-    // Padded image: m on the left/top, m plus alignment slack on the right/bottom.
+    // Padded image: m on the left/top, m plus alignment slack (for the U-Net's pooling) on the
+    // right/bottom.
     let (pw, ph) = (align_up(w + 2 * m, a), align_up(h + 2 * m, a));
     let tile = if opts.tile == 0 { auto_tile(config, method, image.spp) } else { opts.tile };
     let win = window_side(config, method, tile);
     let (ww, wh) = (win.min(pw), win.min(ph));
-    // Window origin for the block starting at output coordinate t (padded coordinate t + m).
-    let origin = |t: usize, size: usize, padded: usize| -> usize {
-        let want = (t + m).saturating_sub(c) / a * a;
-        want.min(padded - size)
+    let mut timings = Timings { tile, ..Default::default() };
+
+    let tp = Instant::now();
+    let pbufs: Option<[Vec<f32>; 2]> = match (&model.diffuse.path, &model.specular.path) {
+        (Some(pd), Some(ps)) => {
+            let unet = (tile, pathnet_radius(config), a, unet_window_side(config, method, tile));
+            Some([pd, ps].map(|net| path_buffer(net, image, (m, pw, ph), unet, chunk, device)))
+        }
+        _ => None,
     };
+    if pbufs.is_some() {
+        timings.path_s = tp.elapsed().as_secs_f64();
+        timings.d_p_s += timings.path_s;
+        timings.forward_s += timings.path_s;
+    }
+
     let mut blocks = Vec::new();
     for ty in (0..h).step_by(tile) {
         for tx in (0..w).step_by(tile) {
             blocks.push((tx, ty, tile.min(w - tx), tile.min(h - ty)));
         }
     }
-
     let mut radiance = vec![0.0f32; 3 * w * h];
     let guided = method == Method::Guided;
     let mut wd = if guided { vec![0.0f32; w * h] } else { Vec::new() };
     let mut ws = wd.clone();
-    let mut timings = Timings { tile, windows: blocks.len(), window: ww.max(wh), ..Default::default() };
+    timings.windows = blocks.len();
+    timings.window = ww.max(wh);
     for chunk in blocks.chunks(opts.batch.max(1)) {
         let tg = Instant::now();
+        // Block at output coordinate t starts at padded coordinate t + m.
         let origins: Vec<(usize, usize)> =
-            chunk.iter().map(|&(tx, ty, _, _)| (origin(tx, ww, pw), origin(ty, wh, ph))).collect();
-        let wins: Vec<PreparedImage> = origins.iter().map(|&(x0, y0)| window(image, m, x0, y0, ww, wh)).collect();
+            chunk.iter().map(|&(tx, ty, _, _)| (window_origin(tx + m, c, 1, ww, pw), window_origin(ty + m, c, 1, wh, ph))).collect();
+        let wins: Vec<PreparedImage> = origins.iter().map(|&(x0, y0)| window(image, m, x0, y0, ww, wh, false)).collect();
         let refs: Vec<&PreparedImage> = wins.iter().collect();
         let input = PreparedImage::to_tensors(&refs, device);
         drop(wins);
+        let pb = pbufs.as_ref().map(|[d, s]| [d, s].map(|b| cut_map(b, b.len() / (pw * ph), pw, ph, &origins, ww, wh, device)));
         timings.gather_s += tg.elapsed().as_secs_f64();
         let tf = Instant::now();
-        let out = timed_forward(model, input, &mut timings);
+        let out = timed_forward(model, input, pb, &mut timings);
         let tr = Instant::now();
         let rad = to_vec(out.radiance);
         let weights = if guided {
@@ -328,17 +496,23 @@ pub fn denoise(
 /// [`MethodModel::forward`] with the time of each network added to `t` (the runtime breakdown
 /// of the paper's Table 1). The same operations in the same order, so the same numbers (tested);
 /// the CPU backend executes eagerly, so the wall time around a call is the time of that network.
-fn timed_forward(model: &MethodModel, input: InputTensors, t: &mut Timings) -> MethodOutput {
+/// `pbufs`: the (diffuse, specular) P-buffers `[B, 13, H, W]` if already computed (then the
+/// path-manifold modules are not run and the results carry no [`crate::pathnet::PathOutput`]).
+fn timed_forward(model: &MethodModel, input: InputTensors, pbufs: Option<[Tensor<4>; 2]>, t: &mut Timings) -> MethodOutput {
     let albedo = input.diffuse.g_block.clone().narrow(1, G_ALBEDO, 3);
-    let diffuse = timed_branch(&model.diffuse, input.diffuse, input.path_weight.clone(), t);
-    let specular = timed_branch(&model.specular, input.specular, input.path_weight, t);
+    let [pd, ps] = match pbufs {
+        Some([d, s]) => [Some(d), Some(s)],
+        None => [None, None],
+    };
+    let diffuse = timed_branch(&model.diffuse, input.diffuse, input.path_weight.clone(), pd, t);
+    let specular = timed_branch(&model.specular, input.specular, input.path_weight, ps, t);
     let te = Instant::now();
     let radiance = recombine(diffuse.output.clone(), specular.output.clone(), albedo);
     t.e_s += te.elapsed().as_secs_f64();
     MethodOutput { diffuse, specular, radiance }
 }
 
-fn timed_branch(nets: &BranchNets, input: BranchInput, path_weight: Tensor<4>, t: &mut Timings) -> BranchResult {
+fn timed_branch(nets: &BranchNets, input: BranchInput, path_weight: Tensor<4>, pbuf: Option<Tensor<4>>, t: &mut Timings) -> BranchResult {
     // Only networks that exist are booked, so a method's breakdown shows 0 for the ones it lacks.
     let lap = |start: Instant, present: bool, acc: &mut f64| {
         if present {
@@ -346,9 +520,19 @@ fn timed_branch(nets: &BranchNets, input: BranchInput, path_weight: Tensor<4>, t
         }
     };
     let tp = Instant::now();
-    let path = nets.path.as_ref().map(|p| p.forward(input.descriptors.clone()));
-    let pbuf = path.as_ref().map(|p| p.pixel_buffer());
-    lap(tp, nets.path.is_some(), &mut t.d_p_s);
+    let (path, pbuf) = match pbuf {
+        Some(pb) => (None, nets.path.as_ref().map(|_| pb)),
+        None => {
+            let path = nets.path.as_ref().map(|p| p.forward(input.descriptors.clone()));
+            let pbuf = path.as_ref().map(|p| p.pixel_buffer());
+            (path, pbuf)
+        }
+    };
+    let path_time = tp.elapsed().as_secs_f64();
+    if nets.path.is_some() {
+        t.d_p_s += path_time;
+        t.path_s += path_time;
+    }
     let tg = Instant::now();
     let i_g = nets.d_g.as_ref().map(|d| d.forward(Tensor::cat(vec![input.colour.clone(), input.g_block.clone()], 1)));
     lap(tg, nets.d_g.is_some(), &mut t.d_g_s);
@@ -425,8 +609,9 @@ mod tests {
     #[test]
     fn tiled_equals_untiled() {
         let d = crate::cpu_device();
-        // Larger than two windows in each direction (window ≈ tile + 2·23 context here), so
-        // there are interior, shifted-edge and partial blocks.
+        // Larger than two windows in each direction (window = tile + 2·(margin + E radius), and
+        // U-Net windows ≈ tile + 2·15 here), so there are interior, shifted-edge and partial
+        // blocks in both passes.
         let (w, h) = (125, 111);
         let img = random_image(w, h, 2, 1);
         let noisy: Vec<f32> = (0..3 * w * h).map(|i| i as f32 * 1e-3).collect();
@@ -463,11 +648,13 @@ mod tests {
         for m in Method::ALL {
             let model = MethodModel::init(&cfg, m, &d);
             let mut t = Timings::default();
-            let a = to_vec(timed_forward(&model, PreparedImage::to_tensors(&[&img], &d), &mut t).radiance);
+            let a = to_vec(timed_forward(&model, PreparedImage::to_tensors(&[&img], &d), None, &mut t).radiance);
             let b = to_vec(model.forward(PreparedImage::to_tensors(&[&img], &d)).radiance);
             assert_eq!(a, b, "{m}");
             assert_eq!(t.d_g_s > 0.0, matches!(m, Method::G | Method::Guided), "{m} {t:?}");
             assert_eq!(t.d_p_s > 0.0, m != Method::G, "{m} {t:?}");
+            assert_eq!(t.path_s > 0.0, m != Method::G, "{m} {t:?}");
+            assert!(t.path_s <= t.d_p_s, "{m} {t:?}");
             assert!(t.e_s > 0.0, "{m} {t:?}");
         }
     }
@@ -489,7 +676,7 @@ mod tests {
         // crop-and-run of one inner block with margin-only context.
         let m = cfg.margin();
         let (x0, y0, b) = (16, 16, 8);
-        let win = window(&img, m, x0, y0, b + 2 * m, b + 2 * m);
+        let win = window(&img, m, x0, y0, b + 2 * m, b + 2 * m, true);
         let out = model.forward(PreparedImage::to_tensors(&[&win], &d));
         let rad = to_vec(out.radiance);
         let mut max_diff = 0.0f32;
@@ -537,19 +724,64 @@ mod tests {
         }
     }
 
-    /// The automatic tile keeps 256 where the budget allows and shrinks as spp grows for models
-    /// with per-sample inputs; the default guided model's context is what the docs state.
+    /// The automatic tile no longer shrinks with spp (windows hold per-pixel inputs only), and
+    /// the tiled pass's context is the KPCN margin plus E's radius, without the U-Net's.
     #[test]
-    fn auto_tile_follows_spp() {
+    fn auto_tile_ignores_spp() {
         let c = DenoiserConfig::cpu_default();
         assert_eq!(context(&c, Method::G), 7);
-        assert_eq!(context(&c, Method::Guided), 7 + 29 + 5);
-        assert_eq!(window_side(&c, Method::Guided, 256), 344);
-        assert_eq!(auto_tile(&c, Method::Guided, 8), 256);
-        assert_eq!(auto_tile(&c, Method::G, 64), 256);
-        let t32 = auto_tile(&c, Method::Guided, 32);
-        assert!(t32 < 256 && t32 >= auto_tile(&c, Method::Guided, 64), "{t32}");
-        assert!(32 * window_side(&c, Method::Guided, t32).pow(2) <= AUTO_SAMPLE_PIXELS);
+        assert_eq!(context(&c, Method::Guided), 7 + 5);
+        assert_eq!(pathnet_radius(&c), 29);
+        assert_eq!(window_side(&c, Method::Guided, 256), 280);
+        assert_eq!(unet_window_side(&c, Method::Guided, 256), 320);
+        for spp in [1, 8, 64, 1024] {
+            assert_eq!(auto_tile(&c, Method::Guided, spp), 256);
+        }
+    }
+
+    /// The staged path (P-buffers for the whole image in chunks, U-Net windows, then tiled
+    /// KPCN/E) gives what `MethodModel::forward` gives on the whole mirror-padded image, for
+    /// every method, at 1, 3 and 8 spp, with one window or 8-px tiles, and with chunks that end
+    /// mid-row (50 sample-pixels) or hold the whole image. Tolerance 1e-4 relative + 1e-5
+    /// absolute, as in `tiled_equals_untiled`: only the blocking of the arithmetic differs
+    /// (chunked 1×1 convolutions, windowed U-Net), which changes f32 rounding at ~1e-6; a wrong
+    /// mirror, a U-Net window out of phase or a pixel mixed up between chunks moves values by
+    /// ≥ 1e-2.
+    #[test]
+    fn staged_equals_model_forward() {
+        let d = crate::cpu_device();
+        let cfg = tiny();
+        let (w, h) = (37, 29);
+        let m = cfg.margin();
+        for method in Method::ALL {
+            let model = MethodModel::init(&cfg, method, &d);
+            let a = alignment(&cfg, method);
+            let (pw, ph) = (align_up(w + 2 * m, a), align_up(h + 2 * m, a));
+            for spp in [1, 3, 8] {
+                let img = random_image(w, h, spp, 40 + spp as u64);
+                let noisy = vec![0.25f32; 3 * w * h];
+                // Reference: the model on the whole padded image, output cropped to the frame.
+                let padded = window(&img, m, 0, 0, pw, ph, true);
+                let reference = to_vec(model.forward(PreparedImage::to_tensors(&[&padded], &d)).radiance);
+                let (ow, oh) = (pw - 2 * m, ph - 2 * m);
+                for (tile, chunk) in [(1000, CHUNK_SAMPLE_PIXELS), (8, 50), (13, CHUNK_SAMPLE_PIXELS)] {
+                    let out = denoise_chunked(&model, &cfg, &img, &noisy, &InferOptions { tile, batch: 2 }, chunk, &d).unwrap();
+                    for y in 0..h {
+                        for x in 0..w {
+                            let i = y * w + x;
+                            for ch in 0..3 {
+                                let want = if img.passthrough[i] { noisy[3 * i + ch] } else { clean(reference[(ch * oh + y) * ow + x]) };
+                                let got = out.radiance[3 * i + ch];
+                                assert!(
+                                    (got - want).abs() <= 1e-5 + 1e-4 * want.abs(),
+                                    "{method} spp {spp} tile {tile} chunk {chunk} ({x},{y},{ch}): {got} vs {want}"
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+        }
     }
 
     #[test]

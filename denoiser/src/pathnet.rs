@@ -139,7 +139,25 @@ pub struct PathNet {
 }
 
 impl PathNet {
-    fn unet(&self, x: Tensor<4>) -> Tensor<4> {
+    /// Stage 1, pointwise per sample: descriptors `[B, S, 36, H, W]` → embedding
+    /// `[B, S, E, H, W]`. Inference runs it on any chunk of pixels (e.g. `[1, S, 36, 1, n]`).
+    pub fn embed(&self, descriptors: Tensor<5>) -> Tensor<5> {
+        let [b, s, c, h, w] = descriptors.dims();
+        let x = sanitize(descriptors, INPUT_LIMIT).reshape([b * s, c, h, w]);
+        let e = self.embed.forward(x);
+        let ew = e.dims()[1];
+        e.reshape([b, s, ew, h, w])
+    }
+
+    /// Stage 2, per pixel: mean of the embedding over samples, `[B, E, H, W]` (the U-Net input).
+    pub fn pixel_mean(e: &Tensor<5>) -> Tensor<4> {
+        let [b, _, ew, h, w] = e.dims();
+        e.clone().mean_dim(1).reshape([b, ew, h, w])
+    }
+
+    /// Stage 3, spatial: the U-Net on the pixel-mean embedding, `[B, E, H, W]` → g
+    /// `[B, unet_widths[0], H, W]`. Its receptive radius is `infer::pathnet_radius`.
+    pub fn unet(&self, x: Tensor<4>) -> Tensor<4> {
         let relu = Activation::Relu;
         let mut skips = Vec::with_capacity(self.down.len());
         let mut x = x;
@@ -164,15 +182,12 @@ impl PathNet {
         x
     }
 
-    /// `descriptors` `[B, S, 36, H, W]` → [`PathOutput`]. Any H, W ≥ 1 work (pooling floors,
-    /// upsampling returns to the skip's exact size).
-    pub fn forward(&self, descriptors: Tensor<5>) -> PathOutput {
-        let [b, s, c, h, w] = descriptors.dims();
-        let x = sanitize(descriptors, INPUT_LIMIT).reshape([b * s, c, h, w]);
-        let e = self.embed.forward(x);
-        let ew = e.dims()[1];
-        let mean = e.clone().reshape([b, s, ew, h, w]).mean_dim(1).reshape([b, ew, h, w]);
-        let g = self.unet(mean);
+    /// Stage 4, pointwise per sample given g: the output head on cat(e, g) and the per-pixel
+    /// mean f_P and variance v_P. `e` `[B, S, E, H, W]` from [`Self::embed`], `g` `[B, G, H, W]`
+    /// from [`Self::unet`] at the same pixels.
+    pub fn head_pool(&self, e: Tensor<5>, g: Tensor<4>) -> PathOutput {
+        let [b, s, ew, h, w] = e.dims();
+        let e = e.reshape([b * s, ew, h, w]);
         let gw = g.dims()[1];
         let g = g.reshape([b, 1, gw, h, w]).expand([b, s, gw, h, w]).reshape([b * s, gw, h, w]);
         let p = Activation::Relu.apply(self.head.forward(Tensor::cat(vec![e, g], 1)));
@@ -185,6 +200,15 @@ impl PathNet {
             Tensor::zeros([b, 1, h, w], &samples.device())
         };
         PathOutput { samples, features, variance }
+    }
+
+    /// `descriptors` `[B, S, 36, H, W]` → [`PathOutput`]. Any H, W ≥ 1 work (pooling floors,
+    /// upsampling returns to the skip's exact size). The four stages in order; inference
+    /// (`infer.rs`) runs the pointwise ones over pixel chunks and the U-Net over the whole image.
+    pub fn forward(&self, descriptors: Tensor<5>) -> PathOutput {
+        let e = self.embed(descriptors);
+        let g = self.unet(Self::pixel_mean(&e));
+        self.head_pool(e, g)
     }
 }
 
