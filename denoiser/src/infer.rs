@@ -318,8 +318,10 @@ fn path_buffer(
     let (uw, uh) = (side.min(pw), side.min(ph));
     let mut g_map: Vec<f32> = Vec::new();
     let mut gw = 0;
-    for by in (0..ph).step_by(tile) {
-        for bx in (0..pw).step_by(tile) {
+    // A window spanning a whole axis keeps all of it (the grid may exceed `tile` by the margin).
+    let (tx, ty) = (if uw == pw { pw } else { tile }, if uh == ph { ph } else { tile });
+    for by in (0..ph).step_by(ty) {
+        for bx in (0..pw).step_by(tx) {
             let o = (window_origin(bx, radius, a, uw, pw), window_origin(by, radius, a, uh, ph));
             let g = to_vec(net.unet(cut_map(&padded, ew, pw, ph, &[o], uw, uh, device)));
             if g_map.is_empty() {
@@ -327,8 +329,8 @@ fn path_buffer(
                 g_map = vec![0.0; gw * np];
             }
             for c in 0..gw {
-                for y in by..(by + tile).min(ph) {
-                    let (bw, ly) = (tile.min(pw - bx), y - o.1);
+                for y in by..(by + ty).min(ph) {
+                    let (bw, ly) = (tx.min(pw - bx), y - o.1);
                     let src = (c * uh + ly) * uw + bx - o.0;
                     g_map[(c * ph + y) * pw + bx..][..bw].copy_from_slice(&g[src..src + bw]);
                 }
