@@ -746,9 +746,9 @@ mod tests {
     /// every method, at 1, 3 and 8 spp, with one window or 8-px tiles, and with chunks that end
     /// mid-row (50 sample-pixels) or hold the whole image. Tolerance 1e-4 relative + 1e-5
     /// absolute, as in `tiled_equals_untiled`: only the blocking of the arithmetic differs
-    /// (chunked 1×1 convolutions, windowed U-Net), which changes f32 rounding at ~1e-6; a wrong
-    /// mirror, a U-Net window out of phase or a pixel mixed up between chunks moves values by
-    /// ≥ 1e-2.
+    /// (chunked 1×1 convolutions, windowed U-Net), which changes f32 rounding at ~1e-6 per op.
+    /// The check can fail: mirror-padding the mean embedding one pixel off (all else unchanged)
+    /// makes it fail (p, 1 spp, one window: 1.2611 vs 1.2609 at the first pixel it reaches).
     #[test]
     fn staged_equals_model_forward() {
         let d = crate::cpu_device();

@@ -48,7 +48,7 @@ pub struct DenoiseArgs {
 #[derive(Args, Clone)]
 pub struct InferArgs {
     /// Output tile side of tiled inference (pixels); memory grows with its square. 0 = automatic
-    /// (256, smaller at high spp for models that read per-sample descriptors).
+    /// (256, at any spp: the per-sample stages run in fixed-size chunks before tiling).
     #[arg(long, default_value_t = 0)]
     pub tile: usize,
     /// Tiles per network pass.
