@@ -406,7 +406,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
         outcome.total_steps,
         outcome.seconds / 60.0,
         per_stage.join(", "),
-        outcome.best_val.map(|v| format!("{v:.5}")).unwrap_or_else(|| "n/a (no val shots)".into()),
+        outcome.best_val.map(|v| format!("{v:.5}")).unwrap_or_else(|| "n/a (no validation ran: no val shots?)".into()),
         peak as f64 / (1 << 20) as f64,
         output.display(),
         log_path.display()

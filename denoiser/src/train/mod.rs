@@ -367,6 +367,8 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
         let deadline = opts.minutes.map(|m| m * 60.0 * cum as f64 / total_planned as f64);
         let mut reason = "steps done";
         while st.step < stage.steps {
+            // Only reached over the deadline when the stage starts there (nothing to validate);
+            // otherwise the check after each step below ends the stage.
             if deadline.is_some_and(|d| elapsed(&started) >= d) {
                 reason = "time budget";
                 break;
@@ -392,7 +394,11 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
             st.step += 1;
             st.total_steps += 1;
             events(Event::Step { stage: k, step: st.step, steps: stage.steps, loss: loss as f64, seconds: t0.elapsed().as_secs_f64(), patches: refs.len() });
-            if st.step % val_every == 0 || st.step == stage.steps {
+            // A stage cut by the budget validates its last step too: the stage continues from
+            // its best validated weights, so otherwise every step since the last validation
+            // would be thrown away.
+            let out_of_time = deadline.is_some_and(|d| elapsed(&started) >= d);
+            if st.step % val_every == 0 || st.step == stage.steps || out_of_time {
                 if let Some(v) = validate(&model, data, opts) {
                     let best = st.best_val.is_none_or(|b| v < b);
                     if best {
@@ -412,6 +418,10 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
                         break;
                     }
                 }
+            }
+            if out_of_time && st.step < stage.steps {
+                reason = "time budget";
+                break;
             }
             if opts.checkpoint_every > 0 && st.step % opts.checkpoint_every == 0 && st.step < stage.steps {
                 if let Some(c) = &ckpt {

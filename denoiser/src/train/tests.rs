@@ -292,3 +292,30 @@ fn guided_starts_from_pretrained_files_and_trains_them() {
     assert_ne!(checkpoint::parameters(end.diffuse.e.as_ref().unwrap()).into_iter().flat_map(|t| t.3).collect::<Vec<f32>>(), e0);
     assert!(matches!(initial_model(&o, Some(&gp), Some(&gp), &dev), Err(TrainError::Options(_))));
 }
+
+/// A stage cut short by `--minutes` validates its last step, so the steps after the last
+/// periodic validation count (the stage keeps its best validated weights). Here validation is
+/// only periodic every 1000 steps and the budget (1 s) ends the stage long before that: the
+/// run must still end with a validation at its last step and a best validation error. Before
+/// the fix such a run kept the weights of its last periodic validation, or none at all.
+#[test]
+fn time_budget_validates_the_last_step() {
+    let data = dataset();
+    let sched = ScheduleOptions { branch_steps: 1_000_000, finetune_steps: 0, ..short() };
+    let mut o = options(Method::G, None, &sched);
+    o.val_every = 1000;
+    o.minutes = Some(1.0 / 60.0);
+    let m = initial_model(&o, None, None, &crate::cpu_training_device()).unwrap();
+    let (mut validated, mut ended) = (Vec::new(), None);
+    let out = run(&data, &o, m, None, false, &mut |e| match e {
+        Event::Validation { step, .. } => validated.push(step),
+        Event::StageEnd { steps, reason, .. } => ended = Some((steps, reason.to_string())),
+        _ => {}
+    })
+    .unwrap();
+    let (steps, reason) = ended.expect("the stage ended");
+    assert_eq!(reason, "time budget");
+    assert!(steps > 0 && steps < 1000, "{steps} steps");
+    assert_eq!(validated, vec![steps], "validated at {validated:?}, stage ended at {steps}");
+    assert!(out.best_val.is_some());
+}
