@@ -377,7 +377,8 @@ pub fn run(a: TrainArgs) -> Result<()> {
         seed: a.seed,
         dataset: a.data.display().to_string(),
         wall_time_s: outcome.seconds,
-        validation_rel_mse: outcome.best_val.unwrap_or(f64::NAN),
+        // Provenance convention: 0 = unknown (JSON has no NaN).
+        validation_rel_mse: outcome.best_val.unwrap_or(0.0),
         steps: outcome.total_steps as u64,
         git_commit: git_commit(),
         date: iso_date_utc(),

@@ -380,6 +380,14 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
                 }
                 return Ok(Outcome { model, best_val: st.best_val, total_steps: st.total_steps, seconds: elapsed(&started), paused: true });
             }
+            // The best validation belongs to the weights the model holds until this stage
+            // takes its first step: a stage that takes none (zero steps, or started past its
+            // deadline) leaves the previous stage's best as the run's.
+            if st.step == 0 && k > 0 {
+                st.best_val = None;
+                st.best_step = None;
+                st.since_best = 0;
+            }
             session_steps += 1;
             let t0 = Instant::now();
             let (refs, mut rng) = draw_batch(data, opts, k, st.step);
@@ -442,12 +450,6 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
             }
         }
         // A stage of zero steps (e.g. --finetune-steps 0) keeps the previous stage's best.
-        let last = opts.stages[k + 1..].iter().all(|s| s.steps == 0);
-        if !last {
-            st.best_val = None;
-            st.best_step = None;
-            st.since_best = 0;
-        }
         st.stage += 1;
         st.step = 0;
         if let Some(c) = &ckpt {
