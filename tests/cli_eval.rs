@@ -88,15 +88,24 @@ fn eval_tiny_configuration_writes_the_page_and_resumes() {
     for (f, min_w, min_h) in [
         ("error-vs-spp.png", 800, 300),
         ("error-vs-time.png", 800, 300),
-        // noisy, G, guided, reference: 4 tiles of 128 px plus gaps; label bar 28 px.
-        ("cornell-box-2spp-images.png", 4 * 128, 128 + 28),
-        ("cornell-box-2spp-errors.png", 4 * 128, 128 + 28),
-        ("cornell-box-2spp-weights.png", 3 * 128, 128 + 28),
+        // noisy, G, guided, reference: 4 tiles of the 128² frame plus gaps; two rows (frames,
+        // zooms), each under a 28 px label bar.
+        ("cornell-box-2spp-images.png", 4 * 128, 2 * (128 + 28)),
+        ("cornell-box-2spp-errors.png", 4 * 128, 2 * (128 + 28)),
+        ("cornell-box-2spp-weights.png", 3 * 128, 2 * (128 + 28)),
     ] {
         let img = image::open(dir.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
         assert!(img.width() >= min_w && img.width() < 2 * min_w && img.height() >= min_h && img.height() < 2 * min_h, "{f}: {}×{}", img.width(), img.height());
         assert!(md.contains(&format!("results/{f}")), "{f} not linked");
     }
+    // The zoom row shows an image, not the background: the reference's zoom (last column,
+    // second row) has many distinct colours.
+    let sheet = image::open(dir.join("cornell-box-2spp-images.png")).unwrap().to_rgb8();
+    let (x0, y0) = (3 * (128 + 4), 128 + 28 + 4 + 28);
+    let mut colours: Vec<[u8; 3]> = (0..128).flat_map(|y| (0..128).map(move |x| (x, y))).map(|(x, y)| sheet.get_pixel(x0 + x, y0 + y).0).collect();
+    colours.sort_unstable();
+    colours.dedup();
+    assert!(colours.len() > 50, "{} colours in the reference zoom", colours.len());
     // Not one colour: the plot has curves and text on its white background.
     let plot = image::open(dir.join("error-vs-spp.png")).unwrap().to_rgb8();
     assert!(plot.pixels().filter(|p| p.0 != [255, 255, 255]).count() > 2000);

@@ -63,6 +63,29 @@ fn train_g_p_guided_and_resume() {
     // Guided without its pretrained models is a clear error, not a crash.
     let o = Command::new(env!("CARGO_BIN_EXE_pixguide")).args(["train", "--data", d, "--method", "guided", "--patch", "24", "-o", &out("x.safetensors"), "--quiet"]).output().unwrap();
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--from-g"));
+    // --all trains the whole comparison, reading each kind of dataset once for all ten runs;
+    // at --all-scale 0.001 its g run has the steps of the g run above (2 + 1), and the shared
+    // dataset gives it the same weights as that run's own read.
+    let all_dir = out("all");
+    let mut a = vec!["train", "--all", "--all-scale", "0.001", "--out-dir", &all_dir];
+    a.extend_from_slice(&common[..6]);
+    a.extend_from_slice(&["--val-every", "1", "--quiet"]);
+    let o = Command::new(env!("CARGO_BIN_EXE_pixguide")).args(&a).current_dir(env!("CARGO_MANIFEST_DIR")).output().unwrap();
+    let (stdout, stderr) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{stderr}");
+    assert!(stdout.contains("plan done"), "{stdout}");
+    assert_eq!(stderr.matches(" loaded in ").count(), 2, "{stderr}");
+    for name in ["g", "p", "both", "guided", "fix-n-train", "radiance-only", "full-n-full"] {
+        assert!(base.join("all").join(format!("{name}-default.safetensors")).exists(), "{name}");
+    }
+    for name in ["g", "p", "guided"] {
+        let f = base.join("all").join(format!("{name}-half.safetensors"));
+        let bytes = std::fs::read(&f).unwrap();
+        let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+        let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + n]).unwrap();
+        assert_eq!(header["__metadata__"]["pixguide.preset"], "half", "{name}-half");
+    }
+    assert_eq!(tensors(&base.join("all/g-default.safetensors")), tensors(&base.join("g.safetensors")));
     // Stop after 2 steps, resume: same tensors as the straight G run above.
     let stopped = train(&["--method", "g", "-o", &out("g2.safetensors"), "--stop-after", "2"]);
     assert!(stopped.starts_with("stopped after 2 steps"), "{stopped}");

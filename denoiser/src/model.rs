@@ -28,13 +28,27 @@ impl DenoiserConfig {
         Self::new(KpcnConfig::new(Variant::G.in_channels()), PathNetConfig::new(), EnsembleConfig::new())
     }
 
-    /// 50 % of every channel width (KPCN 50, E 25 as the paper's "half" model; the PathNet is
-    /// halved too, except its 12-channel P-buffer, which is part of the method).
-    pub fn half() -> Self {
+    /// The paper's "half" model: 50 % of every paper channel width (KPCN 50, E 25; the PathNet
+    /// is halved too, except its 12-channel P-buffer, which is part of the method).
+    pub fn paper_half() -> Self {
         Self::new(
             KpcnConfig::new(Variant::G.in_channels()).with_width(50),
             PathNetConfig::new().with_embed_width(32).with_unet_widths(vec![32, 64, 128]).with_out_hidden(64),
             EnsembleConfig::new().with_width(25),
+        )
+    }
+
+    /// 50 % of every channel width of `cpu_default` (the paper's half model, scaled like our
+    /// default): same depths, kernels and filter size, so the same 7 px margin.
+    pub fn half() -> Self {
+        Self::new(
+            KpcnConfig::new(Variant::G.in_channels()).with_depth(7).with_width(24).with_conv_kernel(3).with_filter_size(13),
+            PathNetConfig::new()
+                .with_embed_width(16)
+                .with_unet_widths(vec![16, 24, 32])
+                .with_convs_per_block(2)
+                .with_out_hidden(16),
+            EnsembleConfig::new().with_depth(5).with_width(12).with_conv_kernel(3),
         )
     }
 
@@ -53,11 +67,12 @@ impl DenoiserConfig {
         )
     }
 
-    /// `default`, `half` or `paper`.
+    /// `default`, `half` (of default), `paper-half` or `paper`.
     pub fn preset(name: &str) -> Option<Self> {
         match name {
             "default" => Some(Self::cpu_default()),
             "half" => Some(Self::half()),
+            "paper-half" => Some(Self::paper_half()),
             "paper" => Some(Self::paper()),
             _ => None,
         }
@@ -223,15 +238,21 @@ mod tests {
 
     #[test]
     fn presets_shapes_and_costs() {
-        for name in ["default", "half", "paper"] {
+        for name in ["default", "half", "paper-half", "paper"] {
             let c = DenoiserConfig::preset(name).unwrap();
             assert!(c.macs_per_pixel(8) > 0);
         }
         let paper = DenoiserConfig::paper();
-        let half = DenoiserConfig::half();
+        let paper_half = DenoiserConfig::paper_half();
         let cpu = DenoiserConfig::cpu_default();
-        assert!(half.macs_per_pixel(8) < paper.macs_per_pixel(8) / 2);
-        assert!(cpu.macs_per_pixel(8) < half.macs_per_pixel(8));
+        let half = DenoiserConfig::half();
+        // Halving widths cuts the width² terms by 4 and the input/output layers by 2: between.
+        for (big, small) in [(&paper, &paper_half), (&cpu, &half)] {
+            let (b, s) = (big.macs_per_pixel(8) as f64, small.macs_per_pixel(8) as f64);
+            assert!(s < b / 2.0 && s > b / 4.5, "{s} vs {b}");
+            assert_eq!(big.margin(), small.margin());
+        }
+        assert!(cpu.macs_per_pixel(8) < paper_half.macs_per_pixel(8));
         assert!(DenoiserConfig::preset("huge").is_none());
     }
 

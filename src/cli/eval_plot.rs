@@ -203,34 +203,71 @@ fn panel(area: &DrawingArea<Canvas<'_>, Shift>, title: &str, x_label: &str, y_la
             continue;
         }
         let col = colour(c.colour);
-        chart
-            .draw_series(LineSeries::new(pts.clone(), col.stroke_width(2)))
-            .map_err(err)?
-            .label(c.label.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], col.stroke_width(2)));
+        chart.draw_series(LineSeries::new(pts.clone(), col.stroke_width(2))).map_err(err)?;
         chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, col.filled()))).map_err(err)?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font(("sans-serif", 12))
-        .background_style(WHITE.mix(0.85))
-        .border_style(RGBColor(160, 160, 160))
-        .draw()
-        .map_err(err)?;
     Ok(())
+}
+
+/// Legend entries (colour, label) of the curves with at least one drawable point, in order,
+/// without repeats.
+fn legend_entries<'a>(sets: &[&'a [Curve]]) -> Vec<(usize, &'a str)> {
+    let mut out: Vec<(usize, &str)> = Vec::new();
+    for c in sets.iter().flat_map(|s| s.iter()) {
+        let drawable = c.points.iter().any(|(x, y)| *x > 0.0 && *y > 0.0 && x.is_finite() && y.is_finite());
+        if drawable && !out.iter().any(|e| e.1 == c.label) {
+            out.push((c.colour, &c.label));
+        }
+    }
+    out
+}
+
+const LEGEND_SCALE: u32 = 2;
+const LEGEND_ROW: u32 = 18;
+
+/// Rows of legend entries laid out left to right in `width` pixels: (x, row) of each entry.
+fn legend_layout(entries: &[(usize, &str)], width: u32) -> Vec<(u32, u32)> {
+    let (mut x, mut row) = (12u32, 0u32);
+    let mut out = Vec::with_capacity(entries.len());
+    for (_, label) in entries {
+        let w = 22 + label.chars().count() as u32 * 4 * LEGEND_SCALE + 18;
+        if x + w > width && x > 12 {
+            x = 12;
+            row += 1;
+        }
+        out.push((x, row));
+        x += w;
+    }
+    out
 }
 
 /// Two log-log panels side by side (left: relMSE, right: 1 − SSIM) written as a PNG.
 /// `x_keys`: the x ticks (e.g. the spp values), or None for a 1-2-5 sequence.
 pub fn write_pair(path: &Path, x_label: &str, x_keys: Option<Vec<f64>>, left: (&str, &[Curve]), right: (&str, &[Curve])) -> Result<()> {
-    let (w, h) = (1100u32, 440u32);
+    let (w, plot_h) = (1100u32, 440u32);
+    // One legend for both panels, below them, so it never covers a curve.
+    let entries = legend_entries(&[left.1, right.1]);
+    let layout = legend_layout(&entries, w);
+    let rows = layout.iter().map(|p| p.1 + 1).max().unwrap_or(0);
+    let h = plot_h + rows * LEGEND_ROW + if rows > 0 { 8 } else { 0 };
     let mut px = vec![255u8; (w * h * 3) as usize];
     {
         let root = DrawingArea::from(Canvas { px: &mut px, w, h });
-        let halves = root.split_evenly((1, 2));
+        let (plots, _) = root.split_vertically(plot_h);
+        let halves = plots.split_evenly((1, 2));
         panel(&halves[0], left.0, x_label, left.0, left.1, x_keys.clone())?;
         panel(&halves[1], right.0, x_label, right.0, right.1, x_keys)?;
+    }
+    for (&(c, label), &(x, row)) in entries.iter().zip(&layout) {
+        let y = plot_h + row * LEGEND_ROW + 4;
+        let RGBColor(r, g, b) = colour(c);
+        for yy in y + 4..y + 7 {
+            for xx in x..x + 16 {
+                let o = ((yy * w + xx) * 3) as usize;
+                px[o..o + 3].copy_from_slice(&[r, g, b]);
+            }
+        }
+        text(&mut px, w, x + 22, y, LEGEND_SCALE, [40, 40, 40], label);
     }
     super::denoise::ensure_parent(path)?;
     renderer::film::png::write_rgb8(path, w, h, px)?;
@@ -252,6 +289,35 @@ pub fn text(px: &mut [u8], width: u32, x: u32, y: u32, s: u32, rgb: [u8; 3], t: 
                         let _ = c.draw_pixel(p, BackendColor { alpha: 1.0, rgb: (rgb[0], rgb[1], rgb[2]) });
                     }
                 }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn curve(label: &str, colour: usize, points: Vec<(f64, f64)>) -> Curve {
+        Curve { label: label.to_string(), colour, points }
+    }
+
+    #[test]
+    fn legend_lists_drawable_curves_once_and_fits() {
+        let a = [curve("noisy (MC)", 0, vec![(1.0, 1.0)]), curve("E radiances only", 7, vec![(2.0, 0.5)]), curve("empty", 3, vec![(0.0, 1.0), (f64::NAN, 2.0)])];
+        let b = [curve("noisy (MC)", 0, vec![(1.0, 0.9)])];
+        let e = legend_entries(&[&a, &b]);
+        assert_eq!(e, vec![(0, "noisy (MC)"), (7, "E radiances only")]);
+        // Many long labels wrap onto several rows; no entry runs past the width or into the next.
+        let labels: Vec<String> = (0..9).map(|i| format!("method number {i} long")).collect();
+        let entries: Vec<(usize, &str)> = labels.iter().enumerate().map(|(i, l)| (i, l.as_str())).collect();
+        let layout = legend_layout(&entries, 600);
+        assert!(layout.iter().map(|p| p.1).max().unwrap() >= 2);
+        for (k, ((_, l), (x, row))) in entries.iter().zip(&layout).enumerate() {
+            let end = x + 22 + l.chars().count() as u32 * 4 * LEGEND_SCALE;
+            assert!(end <= 600, "{l} ends at {end}");
+            if let Some(&(nx, nrow)) = layout.get(k + 1) {
+                assert!(nrow > *row || nx > end);
             }
         }
     }
