@@ -297,8 +297,8 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
         writeln!(
             w,
             "Whole frames shown with tone map (a), the one the metrics use; the number under each name is the image's relMSE. The second row \
-             enlarges {ZOOM}× the window (1/{ZOOM} of each side, outlined above) where the denoised images' summed per-pixel error is largest, with the \
-             window's mean relMSE. \
+             enlarges {ZOOM}× the window (1/{ZOOM} of each side, outlined above) where the denoised images' summed squared error of the displayed \
+             colours is largest, with the window's mean relMSE. \
              Error maps: per-pixel relMSE (mean over channels), log colour scale from 10⁻⁴ (dark) to 1 (yellow). W_G: the share of the \
              G-buffer denoiser per pixel in the guided model (viridis, 0 dark … 1 yellow), diffuse and specular branch (the paper's Fig. 5–7).\n"
         )?;
@@ -481,8 +481,11 @@ pub fn write_pictures(dir: &Path, p: &PictureData) -> Result<()> {
     let reference = tonemapped(&p.reference);
     let toned: Vec<Vec<[f64; 3]>> = ordered.iter().map(|i| tonemapped(&i.2)).collect();
     let errors: Vec<Vec<f64>> = toned.iter().map(|t| error_map(t, &reference)).collect();
-    let denoised: Vec<&Vec<f64>> = ordered.iter().zip(&errors).filter(|(i, _)| i.0 != "noisy").map(|(_, e)| e).collect();
-    let score: Vec<f64> = if denoised.is_empty() { errors.first().cloned().unwrap_or_else(|| vec![0.0; w * h]) } else { (0..w * h).map(|i| denoised.iter().map(|e| e[i]).sum::<f64>()).collect() };
+    // The zoom goes where the denoised images differ most visibly from the reference: squared
+    // error of the displayed (tone-mapped) colours, which unlike relMSE does not single out the
+    // darkest corner.
+    let shown: Vec<&Vec<[f64; 3]>> = ordered.iter().zip(&toned).filter(|(i, _)| i.0 != "noisy").map(|(_, t)| t).collect();
+    let score: Vec<f64> = (0..w * h).map(|i| shown.iter().map(|t| (0..3).map(|c| (t[i][c] - reference[i][c]).powi(2)).sum::<f64>()).sum()).collect();
     let win = hardest_window(&score, w, h);
     let zoom_label = format!("{ZOOM}x zoom");
     let to8 = |t: &[[f64; 3]]| -> Vec<[u8; 3]> { t.iter().map(|c| c.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8)).collect() };

@@ -167,9 +167,9 @@ const PLAN: [PlanItem; 10] = [
     item("radiance-only", "guided", Some("radiance-only"), "default", [0, 0, 400], 2.15),
     item("full-n-full", "guided", Some("full-n-full"), "default", [0, 0, 400], 2.43),
     // The half models get their default twins' step counts, so the sizes differ only in width.
-    item("g", "g", None, "half", [1500, 200, 0], 0.37),
-    item("p", "p", None, "half", [800, 100, 0], 1.25),
-    item("guided", "guided", None, "half", [0, 0, 400], 1.5),
+    item("g", "g", None, "half", [1500, 200, 0], 0.39),
+    item("p", "p", None, "half", [800, 100, 0], 1.35),
+    item("guided", "guided", None, "half", [0, 0, 400], 1.84),
 ];
 
 fn run_all(a: TrainArgs) -> Result<()> {
