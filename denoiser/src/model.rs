@@ -28,28 +28,25 @@ impl DenoiserConfig {
         Self::new(KpcnConfig::new(Variant::G.in_channels()), PathNetConfig::new(), EnsembleConfig::new())
     }
 
-    /// The paper's "half" model: 50 % of every paper channel width (KPCN 50, E 25; the PathNet
-    /// is halved too, except its 12-channel P-buffer, which is part of the method).
-    pub fn paper_half() -> Self {
-        Self::new(
-            KpcnConfig::new(Variant::G.in_channels()).with_width(50),
-            PathNetConfig::new().with_embed_width(32).with_unet_widths(vec![32, 64, 128]).with_out_hidden(64),
-            EnsembleConfig::new().with_width(25),
-        )
+    /// Every channel width halved; depths, kernels, filter size (so the margin) and the
+    /// 12-channel P-buffer, which is part of the method, unchanged.
+    pub fn halved(mut self) -> Self {
+        self.kpcn.width /= 2;
+        self.pathnet.embed_width /= 2;
+        self.pathnet.unet_widths.iter_mut().for_each(|w| *w /= 2);
+        self.pathnet.out_hidden /= 2;
+        self.ensemble.width /= 2;
+        self
     }
 
-    /// 50 % of every channel width of `cpu_default` (the paper's half model, scaled like our
-    /// default): same depths, kernels and filter size, so the same 7 px margin.
+    /// The paper's "half" model (KPCN 50, E 25); halving the PathNet too is our choice.
+    pub fn paper_half() -> Self {
+        Self::paper().halved()
+    }
+
+    /// `cpu_default` halved the same way: the guided-half of our comparison.
     pub fn half() -> Self {
-        Self::new(
-            KpcnConfig::new(Variant::G.in_channels()).with_depth(7).with_width(24).with_conv_kernel(3).with_filter_size(13),
-            PathNetConfig::new()
-                .with_embed_width(16)
-                .with_unet_widths(vec![16, 24, 32])
-                .with_convs_per_block(2)
-                .with_out_hidden(16),
-            EnsembleConfig::new().with_depth(5).with_width(12).with_conv_kernel(3),
-        )
+        Self::cpu_default().halved()
     }
 
     /// Sized for training on this 2-core CPU: see docs/denoiser-design.md for the cost.
@@ -253,6 +250,8 @@ mod tests {
             assert_eq!(big.margin(), small.margin());
         }
         assert!(cpu.macs_per_pixel(8) < paper_half.macs_per_pixel(8));
+        assert_eq!((paper_half.kpcn.width, paper_half.pathnet.embed_width, paper_half.ensemble.width), (50, 32, 25));
+        assert_eq!((half.kpcn.width, half.pathnet.unet_widths.clone(), half.pathnet.out_hidden, half.ensemble.width), (24, vec![16, 24, 32], 16, 12));
         assert!(DenoiserConfig::preset("huge").is_none());
     }
 
