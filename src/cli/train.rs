@@ -224,6 +224,36 @@ pub fn run(a: TrainArgs) -> Result<()> {
     run_one(a, &mut DataCache::new())
 }
 
+/// Reads the training set `a.data` (with or without path descriptors) with a progress bar and
+/// reports its size.
+fn load_dataset(a: &TrainArgs, descriptors: bool, sampling: Sampling) -> Result<Dataset> {
+    let t_load = Instant::now();
+    let heap0 = alloc_stats::current();
+    let load = LoadOptions { spps: a.spp.clone(), descriptors, patch: a.patch, sampling, max_train: a.max_train_shots };
+    let lpb = progress::bar(0, "loading shots");
+    if a.quiet {
+        lpb.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let data = Dataset::load(&a.data, &load, &mut |i, n| {
+        lpb.set_length(n as u64);
+        lpb.set_position(i as u64);
+    })?;
+    lpb.finish_and_clear();
+    eprintln!(
+        "{}: {} train + {} val shots {}×{} at {:?} spp loaded in {:.1} s ({:.0} MiB prepared, heap +{:.0} MiB)",
+        a.data.display(),
+        data.train.len(),
+        data.val.len(),
+        data.width,
+        data.height,
+        data.spps,
+        t_load.elapsed().as_secs_f64(),
+        data.bytes() as f64 / (1 << 20) as f64,
+        (alloc_stats::current().saturating_sub(heap0)) as f64 / (1 << 20) as f64
+    );
+    Ok(data)
+}
+
 /// Datasets already read in this process, by whether they hold path descriptors: `--all` reads
 /// each kind once for all its runs instead of once per run (20–43 s each).
 type DataCache = Vec<(bool, Dataset)>;
@@ -277,35 +307,14 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
     let device = denoiser::cpu_training_device();
     let model = tr::initial_model(&opts, a.from_g.as_deref(), a.from_p.as_deref(), &device)?;
     let descriptors = method.needs_descriptors();
-    if !cache.iter().any(|c| c.0 == descriptors) {
-        let t_load = Instant::now();
-        let heap0 = alloc_stats::current();
-        let load = LoadOptions { spps: a.spp.clone(), descriptors, patch: a.patch, sampling, max_train: a.max_train_shots };
-        let lpb = progress::bar(0, "loading shots");
-        if a.quiet {
-            lpb.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    let k = match cache.iter().position(|c| c.0 == descriptors) {
+        Some(k) => k,
+        None => {
+            cache.push((descriptors, load_dataset(&a, descriptors, sampling)?));
+            cache.len() - 1
         }
-        let data = Dataset::load(&a.data, &load, &mut |i, n| {
-            lpb.set_length(n as u64);
-            lpb.set_position(i as u64);
-        })?;
-        lpb.finish_and_clear();
-        let data_mib = data.bytes() as f64 / (1 << 20) as f64;
-        eprintln!(
-            "{}: {} train + {} val shots {}×{} at {:?} spp loaded in {:.1} s ({:.0} MiB prepared, heap +{:.0} MiB)",
-            a.data.display(),
-            data.train.len(),
-            data.val.len(),
-            data.width,
-            data.height,
-            data.spps,
-            t_load.elapsed().as_secs_f64(),
-            data_mib,
-            (alloc_stats::current().saturating_sub(heap0)) as f64 / (1 << 20) as f64
-        );
-        cache.push((descriptors, data));
-    }
-    let data = &cache.iter().find(|c| c.0 == descriptors).expect("loaded above").1;
+    };
+    let data = &cache[k].1;
     let data_mib = data.bytes() as f64 / (1 << 20) as f64;
 
     let ckpt = a.checkpoint_dir.clone().unwrap_or_else(|| tr::default_checkpoint_dir(&output));
