@@ -85,6 +85,7 @@ fn denoise_breakdown(size: usize, s: usize) {
         g_block: r(24 * n),
         path_weight: r(n),
         descriptors: Some(r(s * 36 * n)),
+        records: None,
         passthrough: vec![false; n],
     };
     let noisy = vec![0.5; 3 * n];

@@ -219,7 +219,13 @@ fn window(img: &PreparedImage, pad: usize, x0: usize, y0: usize, w: usize, h: us
         specular: cut(&img.specular, COLOUR_BLOCK),
         g_block: cut(&img.g_block, G_BLOCK),
         path_weight: cut(&img.path_weight, 1),
-        descriptors: img.descriptors.as_ref().filter(|_| descriptors).map(|d| cut(d, img.spp * DESCRIPTOR_CHANNELS)),
+        descriptors: if descriptors {
+            let pixels: Vec<usize> = rows.iter().flat_map(|&r| cols.iter().map(move |&c| r * img.width + c)).collect();
+            img.descriptor_columns(&pixels)
+        } else {
+            None
+        },
+        records: None,
         passthrough: Vec::new(),
     }
 }
@@ -272,18 +278,13 @@ fn path_buffer(
     device: &Device,
 ) -> Vec<f32> {
     let (w, h, s) = (image.width, image.height, image.spp.max(1));
-    let desc = image.descriptors.as_deref().unwrap_or(&[]);
     let n = w * h;
     let per_chunk = (chunk / s).max(1);
     // Descriptors of the listed image pixels as `[1, S, 36, 1, len]`.
     let gather = |pixels: &mut dyn Iterator<Item = usize>| -> Tensor<5> {
         let idx: Vec<usize> = pixels.collect();
-        let mut data = Vec::with_capacity(s * DESCRIPTOR_CHANNELS * idx.len());
-        for plane in 0..s * DESCRIPTOR_CHANNELS {
-            let p = &desc[plane * n..(plane + 1) * n];
-            data.extend(idx.iter().map(|&i| p[i]));
-        }
         let len = idx.len();
+        let data = image.descriptor_columns(&idx).unwrap_or_else(|| vec![0.0; s * DESCRIPTOR_CHANNELS * len]);
         Tensor::from_data(burn::tensor::TensorData::new(data, [1, s, DESCRIPTOR_CHANNELS, 1, len]), device)
     };
 
@@ -397,7 +398,7 @@ fn denoise_chunked(
     if noisy.len() != 3 * w * h {
         return Err(InferError::NoisySize { got: noisy.len(), expected: 3 * w * h });
     }
-    if method.needs_descriptors() && image.descriptors.is_none() {
+    if method.needs_descriptors() && !image.has_descriptors() {
         return Err(InferError::MissingDescriptors(method));
     }
     let m = config.margin();
@@ -592,6 +593,7 @@ mod tests {
             g_block: r(G_BLOCK * n),
             path_weight: r(n),
             descriptors: Some(r(s * DESCRIPTOR_CHANNELS * n)),
+            records: None,
             passthrough: (0..n).map(|i| i % 11 == 0).collect(),
         }
     }
@@ -637,6 +639,37 @@ mod tests {
             assert_eq!(whole.weights_g.is_some(), m == Method::Guided);
             // Passthrough pixels keep the noisy value.
             assert_eq!(&tiled.radiance[33..36], &noisy[33..36]);
+        }
+    }
+
+    /// Inference from the renderer's records (normalised as read, `prepare_for_inference`) gives
+    /// bit for bit what it gives from the normalised planes (`prepare`), tiled or not, for
+    /// every method; records with more samples than the image use their first `spp`.
+    #[test]
+    fn records_equal_planes() {
+        let d = crate::cpu_device();
+        let (w, h, s) = (70, 53, 3);
+        let mut rec = renderer::film::descriptors::Descriptors::new(w as u32, h as u32, s as u32 + 1);
+        let mut rng = SplitMix64::new(8);
+        for v in rec.data.iter_mut() {
+            *v = (rng.next_f64() * 20.0 - 5.0) as f32;
+        }
+        let mut planes = random_image(w, h, s, 3);
+        let all: Vec<usize> = (0..w * h).collect();
+        planes.descriptors = Some(crate::preprocess::normalised_columns(&rec, s, &all));
+        let mut records = planes.clone();
+        records.descriptors = None;
+        records.records = Some(rec);
+        let noisy = vec![0.5f32; 3 * w * h];
+        let cfg = tiny();
+        for m in [Method::P, Method::Both, Method::Guided] {
+            let model = MethodModel::init(&cfg, m, &d);
+            for tile in [1000, 16] {
+                let o = InferOptions { tile, batch: 2 };
+                let a = denoise(&model, &cfg, &planes, &noisy, &o, &d).unwrap();
+                let b = denoise(&model, &cfg, &records, &noisy, &o, &d).unwrap();
+                assert_eq!(a.radiance, b.radiance, "{m}, tile {tile}");
+            }
         }
     }
 

@@ -7,7 +7,7 @@
 //! 1.2 GB of descriptors, which must never be one tensor.
 
 use burn::tensor::{Device, Tensor, TensorData};
-use renderer::film::descriptors::{field, FIELDS};
+use renderer::film::descriptors::{field, Descriptors, FIELDS};
 use renderer::film::{Frame, PixelBuffer};
 
 use crate::kpcn::channels::{COLOUR_BLOCK, G_BLOCK};
@@ -65,8 +65,12 @@ pub struct PreparedImage {
     pub g_block: Vec<f32>,
     /// Per-pixel mean of the normalised path weight (1 channel; the G+P baseline's extra input).
     pub path_weight: Vec<f32>,
-    /// Normalised per-sample descriptors `[S, 36, H, W]`, if the frame had them.
+    /// Normalised per-sample descriptors `[S, 36, H, W]`, if the frame had them ([`prepare`]).
     pub descriptors: Option<Vec<f32>>,
+    /// Instead of `descriptors` ([`prepare_for_inference`]): the renderer's own per-sample
+    /// records, normalised only when read, so inference never holds a second, planar copy of
+    /// the largest buffer (1.2 GB per copy at 1024², 8 spp).
+    pub records: Option<Descriptors>,
     /// Pixels whose camera ray hit nothing or an emitter in every sample (method.md §7.3: the
     /// evaluation keeps the noisy value there). Empty if the frame had no descriptors.
     pub passthrough: Vec<bool>,
@@ -147,8 +151,44 @@ fn push_gradients(buf: &mut Vec<f32>, start: usize, planes: usize, w: usize, h: 
 }
 
 /// Preprocesses a noisy frame. Needs the split and the G-buffers; the descriptors are taken if
-/// present (the first `frame.spp` samples of them, since lower spp renders are prefixes).
+/// present (the first `frame.spp` samples of them, since lower spp renders are prefixes) and
+/// normalised into planes `[S, 36, H, W]` that crops and batches can cut (training).
 pub fn prepare(frame: &Frame) -> Result<PreparedImage, PrepareError> {
+    let mut img = prepare_blocks(frame)?;
+    if let Some(d) = &frame.descriptors {
+        let all: Vec<usize> = (0..img.width * img.height).collect();
+        img.descriptors = Some(normalised_columns(d, img.spp, &all));
+    }
+    Ok(img)
+}
+
+/// [`prepare`] for inference: moves the frame's descriptors into `records` as they are instead
+/// of copying them into planes; inference normalises them chunk by chunk as it reads them.
+pub fn prepare_for_inference(frame: &mut Frame) -> Result<PreparedImage, PrepareError> {
+    let mut img = prepare_blocks(frame)?;
+    img.records = frame.descriptors.take();
+    Ok(img)
+}
+
+/// Normalised descriptors of `pixels` (indices into the record image) as `[S, 36, len]`: the
+/// first `s` samples of each pixel, method.md §4.1 transform, non-finite values zeroed.
+pub fn normalised_columns(d: &Descriptors, s: usize, pixels: &[usize]) -> Vec<f32> {
+    let (ds, len) = (d.spp as usize, pixels.len());
+    let mut out = vec![0.0f32; s * DESCRIPTOR_CHANNELS * len];
+    for (j, &i) in pixels.iter().enumerate() {
+        for k in 0..s {
+            let rec = &d.data[(i * ds + k) * FIELDS..(i * ds + k) * FIELDS + DESCRIPTOR_CHANNELS];
+            for (c, &v) in rec.iter().enumerate() {
+                out[(k * DESCRIPTOR_CHANNELS + c) * len + j] = finite(normalise_descriptor(c, v));
+            }
+        }
+    }
+    out
+}
+
+/// Everything of [`prepare`] but the descriptor planes: colour and G-buffer blocks, and from the
+/// descriptors (checked against the frame) the path weight and the pass-through mask.
+fn prepare_blocks(frame: &Frame) -> Result<PreparedImage, PrepareError> {
     let (w, h) = (frame.width as usize, frame.height as usize);
     let n = w * h;
     let s = frame.spp.max(1);
@@ -212,8 +252,8 @@ pub fn prepare(frame: &Frame) -> Result<PreparedImage, PrepareError> {
     push_gradients(&mut g, a0, 3, w, h);
     debug_assert_eq!(g.len(), G_BLOCK * n);
 
-    let (descriptors, path_weight, passthrough) = match &frame.descriptors {
-        None => (None, vec![0.0; n], Vec::new()),
+    let (path_weight, passthrough) = match &frame.descriptors {
+        None => (vec![0.0; n], Vec::new()),
         Some(d) => {
             if d.width != frame.width || d.height != frame.height || d.spp < s {
                 return Err(PrepareError::DescriptorShape {
@@ -226,16 +266,11 @@ pub fn prepare(frame: &Frame) -> Result<PreparedImage, PrepareError> {
                 });
             }
             let (s, ds) = (s as usize, d.spp as usize);
-            let mut out = vec![0.0f32; s * DESCRIPTOR_CHANNELS * n];
             let mut pw = vec![0.0f32; n];
             let mut pass = vec![true; n];
             for i in 0..n {
                 for k in 0..s {
                     let rec = &d.data[(i * ds + k) * FIELDS..(i * ds + k + 1) * FIELDS];
-                    for (c, &v) in rec[..DESCRIPTOR_CHANNELS].iter().enumerate() {
-                        out[(k * DESCRIPTOR_CHANNELS + c) * n + i] =
-                            finite(normalise_descriptor(c, v));
-                    }
                     pw[i] +=
                         finite((rec[field::PATH_WEIGHT].max(0.0) + 1e-6).ln() / 90.0) / s as f32;
                     // A camera ray that continued off a non-emitting surface has a bounce type.
@@ -244,7 +279,7 @@ pub fn prepare(frame: &Frame) -> Result<PreparedImage, PrepareError> {
                     }
                 }
             }
-            (Some(out), pw, pass)
+            (pw, pass)
         }
     };
     Ok(PreparedImage {
@@ -255,7 +290,8 @@ pub fn prepare(frame: &Frame) -> Result<PreparedImage, PrepareError> {
         specular: sblock,
         g_block: g,
         path_weight,
-        descriptors,
+        descriptors: None,
+        records: None,
         passthrough,
     })
 }
@@ -375,12 +411,36 @@ impl PreparedImage {
             specular: c(&self.specular, COLOUR_BLOCK),
             g_block: c(&self.g_block, G_BLOCK),
             path_weight: c(&self.path_weight, 1),
-            descriptors: self
-                .descriptors
-                .as_ref()
-                .map(|d| c(d, self.spp * DESCRIPTOR_CHANNELS)),
+            descriptors: match &self.descriptors {
+                Some(d) => Some(c(d, self.spp * DESCRIPTOR_CHANNELS)),
+                None => {
+                    let pixels: Vec<usize> = (y..y + h).flat_map(|r| (x..x + w).map(move |q| r * self.width + q)).collect();
+                    self.descriptor_columns(&pixels)
+                }
+            },
+            records: None,
             passthrough,
         })
+    }
+
+    /// Whether the image has per-sample descriptors, as planes or as records.
+    pub fn has_descriptors(&self) -> bool {
+        self.descriptors.is_some() || self.records.is_some()
+    }
+
+    /// Normalised descriptors of `pixels` (indices into this image) as `[S, 36, len]`, from
+    /// the planes or the records, whichever the image holds.
+    pub fn descriptor_columns(&self, pixels: &[usize]) -> Option<Vec<f32>> {
+        if let Some(d) = &self.descriptors {
+            let n = self.width * self.height;
+            let mut out = Vec::with_capacity(self.spp * DESCRIPTOR_CHANNELS * pixels.len());
+            for plane in 0..self.spp * DESCRIPTOR_CHANNELS {
+                let p = &d[plane * n..(plane + 1) * n];
+                out.extend(pixels.iter().map(|&i| p[i]));
+            }
+            return Some(out);
+        }
+        self.records.as_ref().map(|r| normalised_columns(r, self.spp, pixels))
     }
 
     /// Stacks crops of equal size and spp into one batch. Without descriptors, the descriptor

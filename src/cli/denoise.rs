@@ -112,16 +112,15 @@ pub struct DenoiseRun {
     pub peak_extra_bytes: usize,
 }
 
-/// Preprocesses and denoises a frame in memory. The descriptors are dropped from the frame once
-/// preprocessed (they are the largest buffer and the prepared copy replaces them).
+/// Preprocesses and denoises a frame in memory. The descriptors move from the frame into the
+/// prepared image (they are the largest buffer; inference normalises them as it reads them).
 pub fn denoise_frame(frame: &mut Frame, loaded: &Loaded, opts: &InferOptions) -> Result<DenoiseRun> {
     let base = crate::alloc_stats::reset_peak();
     let t = Instant::now();
     if loaded.method.needs_descriptors() && frame.descriptors.is_none() {
         bail!("the {} model needs per-sample path descriptors, and the frame has none", loaded.method);
     }
-    let prepared = denoiser::preprocess::prepare(frame)?;
-    frame.descriptors = None;
+    let prepared = denoiser::preprocess::prepare_for_inference(frame)?;
     let prepare_s = t.elapsed().as_secs_f64();
     let denoised = infer::denoise(&loaded.model, &loaded.config, &prepared, &frame.radiance.mean, opts, &denoiser::cpu_device())?;
     let peak_extra_bytes = crate::alloc_stats::peak().saturating_sub(base);

@@ -498,9 +498,8 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 }
             }
             let tp = Instant::now();
-            let prepared = preprocess::prepare(&frame).with_context(|| format!("preprocessing {} at {} spp", s.name, job.spp))?;
+            let prepared = preprocess::prepare_for_inference(&mut frame).with_context(|| format!("preprocessing {} at {} spp", s.name, job.spp))?;
             let prepare_s = tp.elapsed().as_secs_f64();
-            frame.descriptors = None;
             inputs.push((desc, frame, render_s, prepared, prepare_s));
         }
         for &i in &job.todo {
@@ -575,9 +574,8 @@ pub fn run(a: EvalArgs) -> Result<()> {
             let (mut frame, render_s) = render(&scene, spp, a.seed, true)?;
             renders += 1;
             let tp = Instant::now();
-            let prepared = preprocess::prepare(&frame)?;
+            let prepared = preprocess::prepare_for_inference(&mut frame)?;
             let prepare_s = tp.elapsed().as_secs_f64();
-            frame.descriptors = None;
             let td = Instant::now();
             let d = infer::denoise(&l.model, &l.config, &prepared, &frame.radiance.mean, &opts, &device)?;
             let denoise_s = td.elapsed().as_secs_f64();

@@ -244,3 +244,34 @@ fn non_finite_buffers_give_finite_inputs() {
         assert!(v.iter().all(|x| x.is_finite()));
     }
 }
+
+/// `prepare_for_inference` keeps the records (moved, not copied) and reads back exactly what
+/// `prepare` puts into planes: same blocks, same columns for any pixel list, same crops.
+#[test]
+fn records_read_like_planes() {
+    let mut f = frame(2);
+    let mut d = Descriptors::new(W as u32, H as u32, 3);
+    for (k, v) in d.data.iter_mut().enumerate() {
+        *v = ((k * 7919) % 1000) as f32 * 0.013 - 2.0;
+    }
+    d.data[5] = f32::INFINITY; // non-finite, yet comparable (NaN ≠ NaN)
+    f.descriptors = Some(d);
+    let planes = prepare(&f).unwrap();
+    let mut g = f.clone();
+    let records = prepare_for_inference(&mut g).unwrap();
+    assert!(g.descriptors.is_none(), "moved into the prepared image");
+    assert!(records.descriptors.is_none() && records.has_descriptors());
+    assert_eq!(records.records.as_ref(), f.descriptors.as_ref());
+    let mut stripped = records.clone();
+    stripped.records = None;
+    let mut planes_stripped = planes.clone();
+    planes_stripped.descriptors = None;
+    assert_eq!(stripped, planes_stripped, "blocks, path weight and pass-through agree");
+    let all: Vec<usize> = (0..W * H).collect();
+    assert_eq!(records.descriptor_columns(&all).as_ref(), planes.descriptors.as_ref());
+    let some = [4, 0, 4, 2];
+    let cols = records.descriptor_columns(&some).unwrap();
+    assert_eq!(Some(cols.clone()), planes.descriptor_columns(&some));
+    assert!(cols.iter().all(|v| v.is_finite()));
+    assert_eq!(records.crop(1, 0, 2, 2).unwrap(), planes.crop(1, 0, 2, 2).unwrap());
+}

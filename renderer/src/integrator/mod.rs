@@ -77,7 +77,6 @@ struct TileResult {
     albedo: Vec<Welford>,
     normal: Vec<Welford>,
     depth: Vec<Welford>,
-    descriptors: Vec<f32>,
     nonfinite: u64,
     rays: u64,
 }
@@ -104,19 +103,32 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
     }
 
     let start = Instant::now();
+    // With descriptors, tiles are bands of TILE full-width rows: each band's descriptors are
+    // then one contiguous slice of the frame's buffer and are written there directly, so the
+    // largest buffer by far (9.9 GB at 1024², 64 spp) never exists twice.
+    let tile_w = if req.descriptors { width } else { TILE };
     let mut tiles = Vec::new();
     for ty in (0..height).step_by(TILE as usize) {
-        for tx in (0..width).step_by(TILE as usize) {
-            tiles.push((tx, ty, TILE.min(width - tx), TILE.min(height - ty)));
+        for tx in (0..width).step_by(tile_w as usize) {
+            tiles.push((tx, ty, tile_w.min(width - tx), TILE.min(height - ty)));
         }
     }
+    let per_pixel = opts.spp as usize * FIELDS;
+    let mut descriptors = if req.descriptors { vec![0.0f32; desc_len as usize] } else { Vec::new() };
+    let slots: Vec<&mut [f32]> = if req.descriptors {
+        descriptors.chunks_mut(TILE as usize * width as usize * per_pixel).collect()
+    } else {
+        tiles.iter().map(|_| <&mut [f32]>::default()).collect()
+    };
+    debug_assert_eq!(slots.len(), tiles.len());
     let done = AtomicU64::new(0);
     let cam = &scene.camera;
     let to_camera = |n: Vec3| Vec3::new(n.dot(cam.right), n.dot(cam.up), -n.dot(cam.forward));
 
     let results: Vec<TileResult> = tiles
         .par_iter()
-        .map(|&(tx, ty, tw, th)| {
+        .zip(slots)
+        .map(|(&(tx, ty, tw, th), slot)| {
             let n = (tw * th) as usize;
             let stats = |on: bool, c: usize| if on { vec![Welford::default(); n * c] } else { Vec::new() };
             let mut t = TileResult {
@@ -130,7 +142,6 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
                 albedo: stats(req.gbuffers, 3),
                 normal: stats(req.gbuffers, 3),
                 depth: stats(req.gbuffers, 1),
-                descriptors: if req.descriptors { vec![0.0; n * opts.spp as usize * FIELDS] } else { Vec::new() },
                 nonfinite: 0,
                 rays: 0,
             };
@@ -162,8 +173,9 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
                             t.depth[li].push(r.depth);
                         }
                         if req.descriptors {
-                            let o = (li * opts.spp as usize + s as usize) * FIELDS;
-                            t.descriptors[o..o + FIELDS].copy_from_slice(&r.descriptor);
+                            // A band's pixel li is its slot's pixel li (full-width rows).
+                            let o = li * per_pixel + s as usize * FIELDS;
+                            slot[o..o + FIELDS].copy_from_slice(&r.descriptor);
                         }
                     }
                 }
@@ -186,7 +198,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
         normal: buf(req.gbuffers, 3),
         depth: buf(req.gbuffers, 1),
         depth_scale: 10.0 * scene.radius,
-        descriptors: if req.descriptors { Some(Descriptors::new(width, height, opts.spp)) } else { None },
+        descriptors: req.descriptors.then(|| Descriptors { width, height, spp: opts.spp, data: descriptors }),
         nonfinite_samples: 0,
     };
     let mut rays = 0;
@@ -209,10 +221,6 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
                     if let Some(d) = dst {
                         d.set(i, &src[li * c..li * c + c]);
                     }
-                }
-                if let Some(d) = &mut frame.descriptors {
-                    let n = opts.spp as usize * FIELDS;
-                    d.data[i * n..(i + 1) * n].copy_from_slice(&t.descriptors[li * n..(li + 1) * n]);
                 }
             }
         }
