@@ -262,3 +262,29 @@ fn descriptor_bsdf_estimator_reproduces_the_radiance() {
     let tol = 4.0 * (bsdf_se * bsdf_se + nee_se * nee_se).sqrt();
     assert!((bsdf_mean - nee_mean).abs() < tol, "BSDF estimator {bsdf_mean} vs NEE {nee_mean} (tol {tol})");
 }
+
+/// Recording descriptors changes the tiling (full-width bands that write straight into the
+/// frame) but not the image; and each pixel's records land at that pixel: a crop's descriptors
+/// equal the full frame's at the same pixels. Sizes are not multiples of the 16-px tile.
+#[test]
+fn descriptor_bands_keep_the_image_and_put_records_at_their_pixels() {
+    let s = mixed_scene(37, 29);
+    let plain = render(&s, 3, 11, 5, BufferRequest { split: true, gbuffers: true, descriptors: false });
+    let full = render(&s, 3, 11, 5, BufferRequest::ALL);
+    assert_eq!(plain.radiance.mean, full.radiance.mean);
+    assert_eq!(plain.diffuse.as_ref().unwrap().mean, full.diffuse.as_ref().unwrap().mean);
+    let d = full.descriptors.as_ref().unwrap();
+    assert!(d.data.iter().any(|&v| v != 0.0));
+    let (x0, y0, w, h) = (5u32, 17u32, 30u32, 12u32);
+    let opts = renderer::integrator::RenderOptions { spp: 3, seed: 11, max_bounces: 5, russian_roulette: false, request: BufferRequest::ALL, crop: Some((x0, y0, w, h)), first_sample: 0 };
+    let (crop, _) = renderer::integrator::render(&s, &opts, &|_| {}).unwrap();
+    let c = crop.descriptors.as_ref().unwrap();
+    let per_pixel = 3 * FIELDS;
+    for y in 0..h as usize {
+        for x in 0..w as usize {
+            let i = y * w as usize + x;
+            let j = (y + y0 as usize) * 37 + x + x0 as usize;
+            assert_eq!(c.data[i * per_pixel..(i + 1) * per_pixel], d.data[j * per_pixel..(j + 1) * per_pixel], "pixel ({x}, {y}) of the crop");
+        }
+    }
+}
