@@ -9,7 +9,9 @@ use denoiser::burn::grad_clipping::GradientClippingConfig;
 use denoiser::burn::optim::{AdamConfig, GradientsParams};
 use denoiser::burn::tensor::{Distribution, Tensor};
 use denoiser::loss::{l1, path_disentangling_loss};
+use denoiser::method::{Method, MethodModel};
 use denoiser::model::{BranchInput, DenoiserConfig};
+use denoiser::preprocess::InputTensors;
 use denoiser::rng::SplitMix64;
 
 fn main() {
@@ -19,7 +21,7 @@ fn main() {
     let (b, size, spp, steps) = (num(1, 4), num(2, 64), num(3, 8), num(4, 3));
     let cfg = DenoiserConfig::preset(preset).unwrap_or_else(|| panic!("unknown preset {preset}"));
     let device = denoiser::cpu_training_device();
-    let mut model = cfg.init(&device);
+    let mut model = MethodModel::init(&cfg, Method::Guided, &device);
     let o = size - 2 * cfg.margin();
     println!(
         "preset {preset}: {:.2} M MAC/pixel forward at {spp} spp; batch {b}×{size}² → {o}² outputs",
@@ -31,7 +33,7 @@ fn main() {
         g_block: Tensor::random([b, 24, size, size], u, d),
         descriptors: Tensor::random([b, spp, 36, size, size], u, d),
     };
-    let (din, sin) = (input(&device), input(&device));
+    let inputs = InputTensors { diffuse: input(&device), specular: input(&device), path_weight: Tensor::zeros([b, 1, size, size], &device) };
     let t_diff = Tensor::<4>::random([b, 3, o, o], u, &device);
     let t_spec = Tensor::<4>::random([b, 3, o, o], u, &device);
     let mut optim = AdamConfig::new()
@@ -42,11 +44,12 @@ fn main() {
     let mut times = Vec::new();
     for step in 0..=steps {
         let start = Instant::now();
-        let (d, s, _) = model.forward(din.clone(), sin.clone());
-        let loss = l1(d.blend.output, t_diff.clone())
-            + l1(s.blend.output, t_spec.clone())
-            + path_disentangling_loss(d.path.samples, t_diff.clone(), &mut rng).mul_scalar(0.1)
-            + path_disentangling_loss(s.path.samples, t_spec.clone(), &mut rng).mul_scalar(0.1);
+        let out = model.forward(inputs.clone());
+        let (d, s) = (out.diffuse, out.specular);
+        let loss = l1(d.output, t_diff.clone())
+            + l1(s.output, t_spec.clone())
+            + path_disentangling_loss(d.path.unwrap().samples, t_diff.clone(), &mut rng).mul_scalar(0.1)
+            + path_disentangling_loss(s.path.unwrap().samples, t_spec.clone(), &mut rng).mul_scalar(0.1);
         let value: f32 = loss.clone().into_scalar();
         let grads = GradientsParams::from_grads(loss.backward(), &model);
         model = optim.step(1e-4, model, grads);

@@ -36,10 +36,9 @@ use std::time::Instant;
 
 use burn::tensor::{Device, Tensor};
 
-use crate::kpcn::channels::{COLOUR_BLOCK, G_ALBEDO, G_BLOCK};
-use crate::kpcn::recombine;
-use crate::method::{BranchNets, BranchResult, Method, MethodModel, MethodOutput};
-use crate::model::{BranchInput, DenoiserConfig};
+use crate::kpcn::channels::{COLOUR_BLOCK, G_BLOCK};
+use crate::method::{Method, MethodModel, MethodOutput, Part};
+use crate::model::DenoiserConfig;
 use crate::pathnet::PathNet;
 use crate::preprocess::{InputTensors, PreparedImage, DESCRIPTOR_CHANNELS};
 
@@ -137,27 +136,26 @@ pub fn pathnet_radius(config: &DenoiserConfig) -> usize {
     total
 }
 
-/// Input context (pixels, per side) of the tiled KPCN/E pass: the KPCN margin plus E's
-/// receptive radius. The path-manifold module's U-Net is not included: its output is computed
-/// for the whole image beforehand, with its own context ([`pathnet_radius`]).
+/// Input context (pixels, per side) of the tiled column/E pass: the columns' receptive radius
+/// (a KPCN's margin; a U-Net's reaches further) plus E's. The path-manifold module's U-Net is not
+/// included: its output is computed for the whole image beforehand, with its own context
+/// ([`pathnet_radius`]).
 pub fn context(config: &DenoiserConfig, method: Method) -> usize {
     let e = if method == Method::Guided { config.ensemble.depth * (config.ensemble.conv_kernel / 2) } else { 0 };
-    config.margin() + e
+    config.column_radius() + e
 }
 
-/// Alignment of the padded image and of U-Net window origins and sizes that keeps the U-Net's
-/// pooling grid in phase with the whole image.
+/// Alignment of the padded image and of window origins and sizes that keeps every U-Net's
+/// pooling grid (the path-manifold module's, the columns') in phase with the whole image.
 pub fn alignment(config: &DenoiserConfig, method: Method) -> usize {
-    if method.needs_descriptors() {
-        1 << (config.pathnet.unet_widths.len().max(1) - 1)
-    } else {
-        1
-    }
+    let path = if method.needs_descriptors() { 1 << (config.pathnet.unet_widths.len().max(1) - 1) } else { 1 };
+    path.max(config.column_alignment())
 }
 
-/// Window side of the KPCN/E pass for an output tile of side `tile`.
+/// Window side of the column/E pass for an output tile of side `tile`.
 pub fn window_side(config: &DenoiserConfig, method: Method, tile: usize) -> usize {
-    tile + 2 * context(config, method)
+    let a = config.column_alignment();
+    align_up(tile + 2 * context(config, method) + a - 1, a)
 }
 
 /// Window side of the U-Net pass (path-manifold models) for a block of side `tile`.
@@ -166,11 +164,13 @@ pub fn unet_window_side(config: &DenoiserConfig, method: Method, tile: usize) ->
     align_up(tile + 2 * pathnet_radius(config) + a - 1, a)
 }
 
-/// Default output tile: 256 (a 280² window of the default guided model, 1.2× its output).
-/// Windows hold per-pixel inputs only, so the sample count no longer matters here; the
-/// per-sample stages run in chunks of [`CHUNK_SAMPLE_PIXELS`].
-pub fn auto_tile(_config: &DenoiserConfig, _method: Method, _spp: usize) -> usize {
-    256
+/// Default output tile. KPCN columns: 256 (a 280² window of the default guided model, 1.2× its
+/// output). U-Net columns need far more context (their receptive radius), so their tiles are
+/// 1024: images up to that size run as one window, and larger ones waste ≤ 1.7× on context.
+/// Windows hold per-pixel inputs only, so the sample count does not matter here; the per-sample
+/// stages run in chunks of [`CHUNK_SAMPLE_PIXELS`].
+pub fn auto_tile(config: &DenoiserConfig) -> usize {
+    if config.mskp.is_some() { 1024 } else { 256 }
 }
 
 /// Samples × pixels per chunk of the per-sample stages of the path-manifold module. Each
@@ -404,10 +404,11 @@ fn denoise_chunked(
     let m = config.margin();
     let c = context(config, method);
     let a = alignment(config, method);
+    let ca = config.column_alignment();
     // Padded image: m on the left/top, m plus alignment slack (for the U-Net's pooling) on the
     // right/bottom.
     let (pw, ph) = (align_up(w + 2 * m, a), align_up(h + 2 * m, a));
-    let tile = if opts.tile == 0 { auto_tile(config, method, image.spp) } else { opts.tile };
+    let tile = if opts.tile == 0 { auto_tile(config) } else { opts.tile };
     let win = window_side(config, method, tile);
     let (ww, wh) = (win.min(pw), win.min(ph));
     let mut timings = Timings { tile, ..Default::default() };
@@ -442,7 +443,7 @@ fn denoise_chunked(
         let tg = Instant::now();
         // Block at output coordinate t starts at padded coordinate t + m.
         let origins: Vec<(usize, usize)> =
-            chunk.iter().map(|&(tx, ty, _, _)| (window_origin(tx + m, c, 1, ww, pw), window_origin(ty + m, c, 1, wh, ph))).collect();
+            chunk.iter().map(|&(tx, ty, _, _)| (window_origin(tx + m, c, ca, ww, pw), window_origin(ty + m, c, ca, wh, ph))).collect();
         let wins: Vec<PreparedImage> = origins.iter().map(|&(x0, y0)| window(image, m, x0, y0, ww, wh, false)).collect();
         let refs: Vec<&PreparedImage> = wins.iter().collect();
         let input = PreparedImage::to_tensors(&refs, device);
@@ -496,70 +497,19 @@ fn denoise_chunked(
     Ok(Denoised { width: w, height: h, radiance, weights_g, timings })
 }
 
-/// [`MethodModel::forward`] with the time of each network added to `t` (the runtime breakdown
-/// of the paper's Table 1). The same operations in the same order, so the same numbers (tested);
-/// the CPU backend executes eagerly, so the wall time around a call is the time of that network.
-/// `pbufs`: the (diffuse, specular) P-buffers `[B, 13, H, W]` if already computed (then the
-/// path-manifold modules are not run and the results carry no [`crate::pathnet::PathOutput`]).
+/// [`MethodModel::forward_timed`] with each network's time booked in `t` (the runtime breakdown
+/// of the paper's Table 1). Only networks that exist report, so a method's breakdown shows 0 for
+/// the ones it lacks.
 fn timed_forward(model: &MethodModel, input: InputTensors, pbufs: Option<[Tensor<4>; 2]>, t: &mut Timings) -> MethodOutput {
-    let albedo = input.diffuse.g_block.clone().narrow(1, G_ALBEDO, 3);
-    let [pd, ps] = match pbufs {
-        Some([d, s]) => [Some(d), Some(s)],
-        None => [None, None],
-    };
-    let diffuse = timed_branch(&model.diffuse, input.diffuse, input.path_weight.clone(), pd, t);
-    let specular = timed_branch(&model.specular, input.specular, input.path_weight, ps, t);
-    let te = Instant::now();
-    let radiance = recombine(diffuse.output.clone(), specular.output.clone(), albedo);
-    t.e_s += te.elapsed().as_secs_f64();
-    MethodOutput { diffuse, specular, radiance }
-}
-
-fn timed_branch(nets: &BranchNets, input: BranchInput, path_weight: Tensor<4>, pbuf: Option<Tensor<4>>, t: &mut Timings) -> BranchResult {
-    // Only networks that exist are booked, so a method's breakdown shows 0 for the ones it lacks.
-    let lap = |start: Instant, present: bool, acc: &mut f64| {
-        if present {
-            *acc += start.elapsed().as_secs_f64()
+    model.forward_timed(input, pbufs, &mut |part, secs| match part {
+        Part::Path => {
+            t.path_s += secs;
+            t.d_p_s += secs;
         }
-    };
-    let tp = Instant::now();
-    let (path, pbuf) = match pbuf {
-        Some(pb) => (None, nets.path.as_ref().map(|_| pb)),
-        None => {
-            let path = nets.path.as_ref().map(|p| p.forward(input.descriptors.clone()));
-            let pbuf = path.as_ref().map(|p| p.pixel_buffer());
-            (path, pbuf)
-        }
-    };
-    let path_time = tp.elapsed().as_secs_f64();
-    if nets.path.is_some() {
-        t.d_p_s += path_time;
-        t.path_s += path_time;
-    }
-    let tg = Instant::now();
-    let i_g = nets.d_g.as_ref().map(|d| d.forward(Tensor::cat(vec![input.colour.clone(), input.g_block.clone()], 1)));
-    lap(tg, nets.d_g.is_some(), &mut t.d_g_s);
-    let tp = Instant::now();
-    let i_p = nets.d_p.as_ref().zip(pbuf.clone()).map(|(d, pb)| d.forward(Tensor::cat(vec![input.colour.clone(), pb], 1)));
-    lap(tp, nets.d_p.is_some(), &mut t.d_p_s);
-    if let (Some(d), Some(pb)) = (&nets.d_gp, pbuf.clone()) {
-        let tp = Instant::now();
-        let output = d.forward(Tensor::cat(vec![input.colour, input.g_block, path_weight, pb], 1));
-        lap(tp, true, &mut t.d_p_s);
-        return BranchResult { output, i_g: None, i_p: None, weights: None, path };
-    }
-    match (&nets.e, i_g, i_p, pbuf) {
-        (Some(e), Some(g), Some(p), Some(pb)) => {
-            let te = Instant::now();
-            let blend = e.forward(g.clone(), p.clone(), input.g_block, pb);
-            lap(te, true, &mut t.e_s);
-            BranchResult { output: blend.output, i_g: Some(g), i_p: Some(p), weights: Some(blend.weights), path }
-        }
-        (None, Some(g), None, _) => BranchResult { output: g.clone(), i_g: Some(g), i_p: None, weights: None, path },
-        (None, None, Some(p), _) => BranchResult { output: p.clone(), i_g: None, i_p: Some(p), weights: None, path },
-        // Unreachable: `denoise` checked `model.method()` first, which rules out other sets.
-        _ => nets.forward(input, path_weight),
-    }
+        Part::DG => t.d_g_s += secs,
+        Part::DP => t.d_p_s += secs,
+        Part::E => t.e_s += secs,
+    })
 }
 
 #[cfg(test)]
@@ -762,16 +712,20 @@ mod tests {
     /// The automatic tile no longer shrinks with spp (windows hold per-pixel inputs only), and
     /// the tiled pass's context is the KPCN margin plus E's radius, without the U-Net's.
     #[test]
-    fn auto_tile_ignores_spp() {
+    fn windows_carry_the_receptive_radius() {
         let c = DenoiserConfig::cpu_default();
         assert_eq!(context(&c, Method::G), 7);
         assert_eq!(context(&c, Method::Guided), 7 + 5);
         assert_eq!(pathnet_radius(&c), 29);
         assert_eq!(window_side(&c, Method::Guided, 256), 280);
         assert_eq!(unet_window_side(&c, Method::Guided, 256), 320);
-        for spp in [1, 8, 64, 1024] {
-            assert_eq!(auto_tile(&c, Method::Guided, spp), 256);
-        }
+        assert_eq!(auto_tile(&c), 256);
+        let ms = DenoiserConfig::mskp();
+        let r = ms.column_radius();
+        assert_eq!(context(&ms, Method::G), r);
+        assert_eq!(window_side(&ms, Method::G, 1024) % 16, 0);
+        assert!(window_side(&ms, Method::G, 1024) >= 1024 + 2 * r + 15);
+        assert_eq!(alignment(&ms, Method::P), 16);
     }
 
     /// The staged path (P-buffers for the whole image in chunks, U-Net windows, then tiled

@@ -1,11 +1,11 @@
 //! KPCN (Bako et al. 2017 as used by the seed, method.md §3, §5): a column of valid 5×5
-//! convolutions predicting a k×k softmax kernel per pixel, one column per branch.
+//! convolutions predicting a k×k softmax kernel per pixel, one column per branch; the channel
+//! layout of the columns' inputs; the recombination of the two branches.
 
 use burn::config::Config;
-use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 
-use crate::kernel::apply_kernel;
+use crate::column::Column;
 use crate::layers::{center_crop, conv_macs, sanitize, Activation, ConvStack, Init, Padding, INPUT_LIMIT};
 use crate::ALBEDO_EPS;
 
@@ -45,7 +45,7 @@ impl Variant {
     }
 }
 
-/// One KPCN column. Paper size: 9 layers, width 100, 5×5, 21×21 filter ("half": width 50).
+/// One KPCN column. Paper size: 9 layers, width 100, 5×5, 21×21 filter (`paper-half`: width 50).
 #[derive(Config, Debug)]
 pub struct KpcnConfig {
     /// Input channels; the first 3 are the colour that gets filtered.
@@ -85,11 +85,11 @@ impl KpcnConfig {
     }
 
     /// Xavier-uniform weights, gain √2 before a ReLU and 1 on the linear output; zero biases.
-    pub fn init(&self, seed: u64, device: &Device) -> KpcnColumn {
+    pub fn init(&self, seed: u64, device: &Device) -> Column {
         assert!(self.depth >= 1 && self.in_channels >= 3, "KPCN needs ≥ 1 layer and a colour input");
         assert!(self.filter_size % 2 == 1, "filter size must be odd");
-        KpcnColumn {
-            net: ConvStack::new(
+        Column::kpcn(
+            ConvStack::new(
                 &self.widths(),
                 self.conv_kernel,
                 Padding::Valid,
@@ -101,31 +101,8 @@ impl KpcnConfig {
                 0x4b50_434e,
                 device,
             ),
-            margin: self.margin(),
-        }
-    }
-}
-
-#[derive(Module, Debug)]
-pub struct KpcnColumn {
-    pub net: ConvStack,
-    pub margin: usize,
-}
-
-impl KpcnColumn {
-    /// Kernel logits `[B, k², H−2m, W−2m]` for a sanitised input.
-    pub fn logits(&self, input: Tensor<4>) -> Tensor<4> {
-        self.net.forward(input)
-    }
-
-    /// Filters the colour (input channels 0..3, uncropped) with the predicted kernels.
-    /// `[B, C_in, H, W]` → `[B, 3, H−2m, W−2m]`, m = [`KpcnConfig::margin`].
-    pub fn forward(&self, input: Tensor<4>) -> Tensor<4> {
-        let [_, _, h, w] = input.dims();
-        assert!(h > 2 * self.margin && w > 2 * self.margin, "KPCN input {h}×{w} smaller than its receptive field");
-        let input = sanitize(input, INPUT_LIMIT);
-        let logits = self.logits(input.clone());
-        apply_kernel(input.narrow(1, 0, 3), logits)
+            self.margin(),
+        )
     }
 }
 
@@ -141,35 +118,11 @@ pub fn recombine(diffuse: Tensor<4>, log_specular: Tensor<4>, albedo: Tensor<4>)
     diffuse * a.add_scalar(ALBEDO_EPS) + log_specular.clamp_max(MAX_LOG_SPECULAR).exp().sub_scalar(1.0)
 }
 
-/// The two-branch KPCN: independent diffuse and specular columns.
-#[derive(Module, Debug)]
-pub struct Kpcn {
-    pub diffuse: KpcnColumn,
-    pub specular: KpcnColumn,
-}
-
-impl Kpcn {
-    pub fn new(config: &KpcnConfig, seed: u64, device: &Device) -> Self {
-        Self {
-            diffuse: config.init(seed.wrapping_add(1), device),
-            specular: config.init(seed.wrapping_add(2), device),
-        }
-    }
-
-    /// Returns (D̂, P̂, radiance). `albedo` `[B, 3, H, W]` is the uncropped A used to remodulate.
-    pub fn forward(&self, diffuse_in: Tensor<4>, specular_in: Tensor<4>, albedo: Tensor<4>) -> (Tensor<4>, Tensor<4>, Tensor<4>) {
-        let d = self.diffuse.forward(diffuse_in);
-        let p = self.specular.forward(specular_in);
-        let out = recombine(d.clone(), p.clone(), albedo);
-        (d, p, out)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::cpu_device;
-    use crate::test_util::{tensor, to_vec};
+    use crate::test_util::to_vec;
 
     #[test]
     fn channel_counts_match_the_method() {
@@ -190,10 +143,11 @@ mod tests {
     fn output_shape_and_recombination() {
         let d = cpu_device();
         let cfg = KpcnConfig::new(Variant::G.in_channels()).with_depth(3).with_width(8).with_conv_kernel(3).with_filter_size(5);
-        let k = Kpcn::new(&cfg, 5, &d);
         let x = Tensor::<4>::ones([2, 34, 12, 10], &d);
         let albedo = Tensor::<4>::ones([2, 3, 12, 10], &d).mul_scalar(0.5);
-        let (dh, ph, out) = k.forward(x.clone(), x, albedo);
+        let dh = cfg.init(6, &d).forward(x.clone());
+        let ph = cfg.init(7, &d).forward(x);
+        let out = recombine(dh.clone(), ph.clone(), albedo);
         assert_eq!(dh.dims(), [2, 3, 6, 4]);
         // The kernel is a convex combination and here every tap inside the buffer reads 1 and
         // the receptive field is fully inside, so D̂ = P̂ = 1 and out = 1·(0.5+ε) + e − 1.
@@ -202,24 +156,5 @@ mod tests {
             assert!((v - expect).abs() < 1e-5, "{v} vs {expect}");
         }
         assert!(to_vec(ph).iter().all(|v| (v - 1.0).abs() < 1e-5));
-    }
-
-    /// NaN, ±Inf, 1e6 and all-zero inputs give finite outputs.
-    #[test]
-    fn hostile_inputs_give_finite_outputs() {
-        let d = cpu_device();
-        let cfg = KpcnConfig::new(Variant::P.in_channels()).with_depth(3).with_width(8).with_conv_kernel(3).with_filter_size(5);
-        let k = Kpcn::new(&cfg, 9, &d);
-        let n = 23 * 10 * 10;
-        let specials = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e6, -1e6, 0.0];
-        for fill in [None, Some(0.0), Some(1e6), Some(f64::NAN)] {
-            let v: Vec<f64> = (0..n).map(|i| fill.unwrap_or(specials[i % specials.len()])).collect();
-            let x = tensor(&v, [1, 23, 10, 10], &d);
-            let alb = tensor(&v[..300], [1, 3, 10, 10], &d);
-            let (dh, ph, out) = k.forward(x.clone(), x, alb);
-            for t in [dh, ph, out] {
-                assert!(to_vec(t).iter().all(|v| v.is_finite()), "non-finite output for fill {fill:?}");
-            }
-        }
     }
 }

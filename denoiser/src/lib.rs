@@ -1,7 +1,7 @@
 //! Pixel-wise guidance Monte Carlo denoiser (Han et al. 2023) on burn 0.22.
 //!
-//! The crate holds the networks, the differentiable ops and the losses; data loading and the
-//! training loop live elsewhere. Facts and their sources: `docs/method.md` §2–§6 (shared docs);
+//! The crate holds the networks, the differentiable ops, the losses, preprocessing, training and
+//! tiled inference. Facts and their sources: `docs/method.md` §2–§6 (shared docs);
 //! design decisions and measured costs: `docs/denoiser-design.md`.
 //!
 //! Layout convention: every image tensor is NCHW `[batch, channels, height, width]`; per-sample
@@ -10,10 +10,12 @@
 //!
 //! Modules:
 //! - [`kernel`]: softmax kernel prediction filter (the KPCN reconstruction op).
-//! - [`kpcn`]: KPCN columns (D_G, D_P, G+P baseline) and the diffuse/specular recombination.
+//! - [`column`]: a denoising column (D_G, D_P, G+P baseline) of either backbone.
+//! - [`kpcn`]: the KPCN backbone, the columns' input channels, the diffuse/specular recombination.
+//! - [`mskp`]: the multi-scale kernel-predicting U-Net backbone.
 //! - [`pathnet`]: the path-manifold module producing the P-buffer.
 //! - [`ensemble`]: network E and the per-pixel blend of the two denoisers.
-//! - [`model`]: one full branch framework (D_G, D_P, PathNet, E) and the size presets.
+//! - [`model`]: the network sizes (presets) of the whole framework.
 //! - [`preprocess`]: network inputs from a rendered frame, targets from a reference (§2, §4.1).
 //! - [`method`]: the compared methods (G, P, both, guided) as one model type.
 //! - [`loss`]: L1, the path-disentangling loss, validation relMSE.
@@ -23,6 +25,7 @@
 //! - [`train`]: data, patch sampling, the staged schedule, checkpoints (docs/training.md).
 //! - [`layers`]: convolution with deterministic init, input sanitising, cropping.
 
+pub mod column;
 pub mod ensemble;
 pub mod infer;
 pub mod kernel;
@@ -32,6 +35,7 @@ pub mod loss;
 pub mod method;
 pub mod metrics;
 pub mod model;
+pub mod mskp;
 pub mod pathnet;
 pub mod preprocess;
 pub mod rng;

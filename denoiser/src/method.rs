@@ -5,12 +5,15 @@
 //! so a weight file contains exactly those tensors, named by module path
 //! (`diffuse.d_g.net.layers.0.weight`, …).
 
+use std::time::Instant;
+
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 
 use crate::ensemble::{Blend, EnsembleNet};
 use crate::kpcn::channels::G_ALBEDO;
-use crate::kpcn::{recombine, KpcnColumn, Variant};
+use crate::column::Column;
+use crate::kpcn::{recombine, Variant};
 use crate::model::DenoiserConfig;
 use crate::pathnet::{PathNet, PathOutput};
 use crate::preprocess::InputTensors;
@@ -60,9 +63,9 @@ impl std::fmt::Display for Method {
 /// The networks of one branch (diffuse or specular); unused ones are `None`.
 #[derive(Module, Debug)]
 pub struct BranchNets {
-    pub d_g: Option<KpcnColumn>,
-    pub d_p: Option<KpcnColumn>,
-    pub d_gp: Option<KpcnColumn>,
+    pub d_g: Option<Column>,
+    pub d_p: Option<Column>,
+    pub d_gp: Option<Column>,
     pub path: Option<PathNet>,
     pub e: Option<EnsembleNet>,
 }
@@ -96,14 +99,14 @@ pub struct MethodModel {
 
 impl BranchNets {
     fn init(config: &DenoiserConfig, method: Method, branch_seed: u64, device: &Device) -> Self {
-        // Same seeds as `DenoiserConfig::init_branch`, so a guided model starts from the very
-        // D_G / D_P a G or P model of the same seed starts from.
+        // Seeds per network, not per method, so a guided model starts from the very D_G / D_P a
+        // G or P model of the same seed starts from.
         let s = config.seed.wrapping_mul(0x9E37_79B9).wrapping_add(branch_seed.wrapping_mul(100));
         let uses = |m: &[Method]| m.contains(&method);
         BranchNets {
-            d_g: uses(&[Method::G, Method::Guided]).then(|| config.kpcn_for(Variant::G).init(s + 1, device)),
-            d_p: uses(&[Method::P, Method::Guided]).then(|| config.kpcn_for(Variant::P).init(s + 2, device)),
-            d_gp: uses(&[Method::Both]).then(|| config.kpcn_for(Variant::GP).init(s + 5, device)),
+            d_g: uses(&[Method::G, Method::Guided]).then(|| config.init_column(Variant::G, s + 1, device)),
+            d_p: uses(&[Method::P, Method::Guided]).then(|| config.init_column(Variant::P, s + 2, device)),
+            d_gp: uses(&[Method::Both]).then(|| config.init_column(Variant::GP, s + 5, device)),
             path: method.needs_descriptors().then(|| config.pathnet.init(s + 3, device)),
             e: uses(&[Method::Guided]).then(|| config.ensemble.init(s + 4, device)),
         }
@@ -121,17 +124,36 @@ impl BranchNets {
     }
 
     pub fn forward(&self, input: BranchInput, path_weight: Tensor<4>) -> BranchResult {
-        let path = self.path.as_ref().map(|p| p.forward(input.descriptors.clone()));
-        let pbuf = path.as_ref().map(|p| p.pixel_buffer());
-        let i_g = self.d_g.as_ref().map(|d| d.forward(Tensor::cat(vec![input.colour.clone(), input.g_block.clone()], 1)));
-        let i_p = self.d_p.as_ref().map(|d| d.forward(Tensor::cat(vec![input.colour.clone(), pbuf.clone().expect("D_P needs a PathNet")], 1)));
+        self.forward_timed(input, path_weight, None, &mut |_, _| {})
+    }
+
+    /// The branch's forward pass, reporting the wall time of each network to `lap` (the CPU
+    /// backend executes eagerly, so the time around a call is that network's). `pbuf`: the
+    /// P-buffer `[B, 13, H, W]` if already computed (inference computes it for the whole image
+    /// first); then the PathNet is not run and the result carries no [`PathOutput`].
+    pub fn forward_timed(&self, input: BranchInput, path_weight: Tensor<4>, pbuf: Option<Tensor<4>>, lap: &mut dyn FnMut(Part, f64)) -> BranchResult {
+        let (path, pbuf) = match (pbuf, &self.path) {
+            (Some(pb), Some(_)) => (None, Some(pb)),
+            (_, Some(net)) => {
+                let path = timed(lap, Part::Path, || net.forward(input.descriptors.clone()));
+                let pb = path.pixel_buffer();
+                (Some(path), Some(pb))
+            }
+            (_, None) => (None, None),
+        };
+        let i_g = self.d_g.as_ref().map(|d| timed(lap, Part::DG, || d.forward(Tensor::cat(vec![input.colour.clone(), input.g_block.clone()], 1))));
+        let i_p = self.d_p.as_ref().map(|d| {
+            let pb = pbuf.clone().expect("D_P needs a PathNet");
+            timed(lap, Part::DP, || d.forward(Tensor::cat(vec![input.colour.clone(), pb], 1)))
+        });
         if let Some(d) = &self.d_gp {
             let x = Tensor::cat(vec![input.colour, input.g_block, path_weight, pbuf.expect("G+P needs a PathNet")], 1);
-            return BranchResult { output: d.forward(x), i_g: None, i_p: None, weights: None, path };
+            let output = timed(lap, Part::DP, || d.forward(x));
+            return BranchResult { output, i_g: None, i_p: None, weights: None, path };
         }
         match (&self.e, i_g, i_p) {
             (Some(e), Some(g), Some(p)) => {
-                let Blend { output, weights } = e.forward(g.clone(), p.clone(), input.g_block, pbuf.unwrap());
+                let Blend { output, weights } = timed(lap, Part::E, || e.forward(g.clone(), p.clone(), input.g_block, pbuf.unwrap()));
                 BranchResult { output, i_g: Some(g), i_p: Some(p), weights: Some(weights), path }
             }
             (None, Some(g), None) => BranchResult { output: g.clone(), i_g: Some(g), i_p: None, weights: None, path },
@@ -139,6 +161,27 @@ impl BranchNets {
             _ => panic!("inconsistent branch networks (method {:?})", self.method()),
         }
     }
+}
+
+/// Runs `f` and reports its wall time as `part`'s.
+fn timed<T>(lap: &mut dyn FnMut(Part, f64), part: Part, f: impl FnOnce() -> T) -> T {
+    let t = Instant::now();
+    let out = f();
+    lap(part, t.elapsed().as_secs_f64());
+    out
+}
+
+/// The network a time reported by [`BranchNets::forward_timed`] belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Part {
+    /// The path-manifold module.
+    Path,
+    /// The column on G-buffers.
+    DG,
+    /// The column on P-buffers, or the both-buffers column.
+    DP,
+    /// E and the blend; [`MethodModel::forward_timed`] also books the recombination here.
+    E,
 }
 
 impl MethodModel {
@@ -154,10 +197,17 @@ impl MethodModel {
 
     /// Runs both branches and recombines D̂ ⊙ (A + ε_a) + exp(P̂) − 1 (method.md §3, §6.1).
     pub fn forward(&self, input: InputTensors) -> MethodOutput {
+        self.forward_timed(input, None, &mut |_, _| {})
+    }
+
+    /// [`Self::forward`] with each network's time reported to `lap` and, optionally, the
+    /// (diffuse, specular) P-buffers already computed (see [`BranchNets::forward_timed`]).
+    pub fn forward_timed(&self, input: InputTensors, pbufs: Option<[Tensor<4>; 2]>, lap: &mut dyn FnMut(Part, f64)) -> MethodOutput {
         let albedo = input.diffuse.g_block.clone().narrow(1, G_ALBEDO, 3);
-        let diffuse = self.diffuse.forward(input.diffuse, input.path_weight.clone());
-        let specular = self.specular.forward(input.specular, input.path_weight);
-        let radiance = recombine(diffuse.output.clone(), specular.output.clone(), albedo);
+        let [pd, ps] = pbufs.map_or([None, None], |[d, s]| [Some(d), Some(s)]);
+        let diffuse = self.diffuse.forward_timed(input.diffuse, input.path_weight.clone(), pd, lap);
+        let specular = self.specular.forward_timed(input.specular, input.path_weight, ps, lap);
+        let radiance = timed(lap, Part::E, || recombine(diffuse.output.clone(), specular.output.clone(), albedo));
         MethodOutput { diffuse, specular, radiance }
     }
 }
@@ -214,7 +264,7 @@ mod tests {
         let d = crate::cpu_device();
         let g = MethodModel::init(&tiny(), Method::G, &d);
         let guided = MethodModel::init(&tiny(), Method::Guided, &d);
-        let w = |m: &MethodModel| to_vec(m.specular.d_g.as_ref().unwrap().net.layers[0].weight.val());
+        let w = |m: &MethodModel| to_vec(m.specular.d_g.as_ref().unwrap().net.as_ref().unwrap().layers[0].weight.val());
         assert_eq!(w(&g), w(&guided));
     }
 }

@@ -24,7 +24,7 @@ pub struct DatasetArgs {
     #[arg(long, default_value_t = 4)]
     pub shots: u32,
     /// Noisy sample counts; each is a prefix of the largest (same seed, same streams).
-    #[arg(long, value_delimiter = ',', default_value = "2,4,8")]
+    #[arg(long, value_delimiter = ',', default_value = "2,4,8,16,32")]
     pub spp: Vec<u32>,
     /// Reference samples per pixel.
     #[arg(long, default_value_t = 1024)]

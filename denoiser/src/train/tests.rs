@@ -279,7 +279,7 @@ fn guided_starts_from_pretrained_files_and_trains_them() {
     let (gp, g) = save(Method::G, 11);
     let (pp, p) = save(Method::P, 12);
     let start = initial_model(&o, Some(&gp), Some(&pp), &dev).unwrap();
-    let vals = |m: &Option<_>| m.as_ref().map(|x: &crate::kpcn::KpcnColumn| checkpoint::parameters(x).into_iter().flat_map(|t| t.3).collect::<Vec<f32>>());
+    let vals = |m: &Option<_>| m.as_ref().map(|x: &crate::column::Column| checkpoint::parameters(x).into_iter().flat_map(|t| t.3).collect::<Vec<f32>>());
     assert_eq!(vals(&start.diffuse.d_g), vals(&g.diffuse.d_g));
     assert_eq!(vals(&start.specular.d_p), vals(&p.specular.d_p));
     let path_vals = |m: &MethodModel| checkpoint::parameters(m.diffuse.path.as_ref().unwrap()).into_iter().flat_map(|t| t.3).collect::<Vec<f32>>();
