@@ -517,6 +517,7 @@ mod tests {
     use super::*;
     use crate::ensemble::EnsembleConfig;
     use crate::kpcn::KpcnConfig;
+    use crate::mskp::MsKpConfig;
     use crate::pathnet::PathNetConfig;
     use crate::rng::SplitMix64;
 
@@ -736,12 +737,24 @@ mod tests {
     /// (chunked 1×1 convolutions, windowed U-Net), which changes f32 rounding at ~1e-6 per op.
     /// The check can fail: mirror-padding the mean embedding one pixel off (all else unchanged)
     /// makes it fail (p, 1 spp, one window: 1.2611 vs 1.2609 at the first pixel it reaches).
+    /// With U-Net columns the image is larger than a window, so tiles of 16 and 24 px cut it
+    /// into several windows that carry the columns' receptive radius and keep their pooling
+    /// grids in phase.
     #[test]
     fn staged_equals_model_forward() {
+        let mskp = tiny().with_mskp(Some(MsKpConfig::new(34).with_widths(vec![6, 8]).with_kernel_scales(2).with_filter_size(3).with_margin(2)));
+        for (cfg, (w, h), tiles) in [(tiny(), (37, 29), [8, 13]), (mskp, (80, 72), [16, 24])] {
+            staged_equals_model_forward_for(&cfg, w, h, tiles);
+        }
+    }
+
+    fn staged_equals_model_forward_for(cfg: &DenoiserConfig, w: usize, h: usize, tiles: [usize; 2]) {
         let d = crate::cpu_device();
-        let cfg = tiny();
-        let (w, h) = (37, 29);
+        let cfg = cfg.clone();
         let m = cfg.margin();
+        if cfg.mskp.is_some() {
+            assert!(window_side(&cfg, Method::Guided, tiles[1]) < w + 2 * m, "the U-Net case must cut the image into several windows");
+        }
         for method in Method::ALL {
             let model = MethodModel::init(&cfg, method, &d);
             let a = alignment(&cfg, method);
@@ -753,7 +766,7 @@ mod tests {
                 let padded = window(&img, m, 0, 0, pw, ph, true);
                 let reference = to_vec(model.forward(PreparedImage::to_tensors(&[&padded], &d)).radiance);
                 let (ow, oh) = (pw - 2 * m, ph - 2 * m);
-                for (tile, chunk) in [(1000, CHUNK_SAMPLE_PIXELS), (8, 50), (13, CHUNK_SAMPLE_PIXELS)] {
+                for (tile, chunk) in [(1000, CHUNK_SAMPLE_PIXELS), (tiles[0], 50), (tiles[1], CHUNK_SAMPLE_PIXELS)] {
                     let out = denoise_chunked(&model, &cfg, &img, &noisy, &InferOptions { tile, batch: 2 }, chunk, &d).unwrap();
                     for y in 0..h {
                         for x in 0..w {
