@@ -10,7 +10,7 @@ use denoiser::method::{Method, MethodModel};
 use denoiser::model::DenoiserConfig;
 use denoiser::train::data::{batch_tensors, Dataset, LoadOptions};
 use denoiser::train::patches::Sampling;
-use denoiser::train::schedule::{Stage, StageKind};
+use denoiser::train::schedule::{LrShape, Stage, StageKind};
 use denoiser::train::{draw_batch, optimizer, train_step, TrainOptions};
 
 fn main() {
@@ -21,7 +21,7 @@ fn main() {
     let load = LoadOptions { spps: vec![], descriptors: true, patch, sampling: Sampling::Importance, max_train: None };
     let data = Dataset::load(std::path::Path::new(data_dir), &load, &mut |_, _| {}).unwrap();
     let dev = denoiser::cpu_training_device();
-    let stage = |kind, rest: Option<f64>, e: Option<f64>, w| Stage { kind, steps: 1, lr_rest: rest, lr_e: e, w_path: w };
+    let stage = |kind, rest: Option<f64>, e: Option<f64>, w| Stage { kind, steps: 1, lr_rest: rest, lr_e: e, w_path: w, shape: LrShape::Constant };
     let variants: Vec<(&str, &str, Method, Stage, bool)> = vec![
         ("g branches", "default", Method::G, stage(StageKind::Branches, Some(1e-4), None, 0.0), false),
         ("g finetune", "default", Method::G, stage(StageKind::Finetune, Some(1e-6), None, 0.0), false),
@@ -57,6 +57,7 @@ fn main() {
                 patch,
                 batch,
                 stages: vec![st.clone()],
+                augment: true,
                 val_every: 0,
                 val_batch: 8,
                 patience: None,
@@ -85,7 +86,7 @@ fn main() {
             let t0 = Instant::now();
             let (refs, mut rng) = draw_batch(&data, opts, 0, round);
             let (input, target) = batch_tensors(&data.train, &refs, &data.spps, patch, opts.config.margin(), v.2.needs_descriptors(), &dev);
-            let (m, _) = train_step(model.take().unwrap(), optim, input, &target, st, &e_ids, &mut rng).unwrap();
+            let (m, _) = train_step(model.take().unwrap(), optim, input, &target, st, 1.0, &e_ids, &mut rng).unwrap();
             *model = Some(m);
             if round > 0 {
                 times.push(t0.elapsed().as_secs_f64());

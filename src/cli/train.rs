@@ -9,7 +9,7 @@ use denoiser::method::Method;
 use denoiser::model::DenoiserConfig;
 use denoiser::train::data::{Dataset, LoadOptions};
 use denoiser::train::patches::Sampling;
-use denoiser::train::schedule::{self, Ablation, ScheduleOptions};
+use denoiser::train::schedule::{self, Ablation, LrShape, ScheduleOptions};
 use denoiser::train::{self as tr, Event, TrainOptions};
 use denoiser::weights::{self, Provenance};
 use std::collections::BTreeMap;
@@ -35,8 +35,8 @@ pub struct TrainArgs {
     /// Trained P model the guided model starts from.
     #[arg(long)]
     pub from_p: Option<PathBuf>,
-    /// Network sizes: default (CPU), half (50 % of default's channels), paper-half (50 % of
-    /// the paper's) or paper.
+    /// Network sizes: default (CPU KPCN), half (50 % of default's channels), mskp (multi-scale
+    /// kernel-predicting U-Net columns), paper-half (50 % of the paper's) or paper.
     #[arg(long, default_value = "default")]
     pub preset: String,
     #[arg(long, default_value_t = 1)]
@@ -96,6 +96,16 @@ pub struct TrainArgs {
     pub lr_joint_rest: Option<f64>,
     #[arg(long)]
     pub lr_scratch: Option<f64>,
+    /// Learning-rate shape within each stage: cosine (linear warm-up over --warmup of the
+    /// stage's steps from 1/10 of the rate, then cosine decay to 1/50) or constant (the paper's).
+    #[arg(long, default_value = "cosine", value_parser = ["cosine", "constant"])]
+    pub lr_schedule: String,
+    /// Warm-up fraction of each stage's steps (with --lr-schedule cosine).
+    #[arg(long, default_value_t = 0.05)]
+    pub warmup: f64,
+    /// Train on unmoved patches (no random flips and rotations).
+    #[arg(long)]
+    pub no_augment: bool,
     /// Validate every N steps (0 = once per epoch).
     #[arg(long, default_value_t = 0)]
     pub val_every: usize,
@@ -138,6 +148,7 @@ fn schedule_options(a: &TrainArgs) -> ScheduleOptions {
     setf(&mut o.lr_joint_e, a.lr_joint_e);
     setf(&mut o.lr_joint_rest, a.lr_joint_rest);
     setf(&mut o.lr_scratch, a.lr_scratch);
+    o.lr_shape = if a.lr_schedule == "constant" { LrShape::Constant } else { LrShape::WarmupCosine { warmup: a.warmup } };
     o
 }
 
@@ -271,7 +282,10 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
         }
         method = Method::Guided;
     }
-    let config = DenoiserConfig::preset(&a.preset).with_context(|| format!("--preset {}: expected default, half, paper-half or paper", a.preset))?;
+    let config = DenoiserConfig::preset(&a.preset).with_context(|| format!("--preset {}: expected one of {}", a.preset, DenoiserConfig::PRESETS.join(", ")))?;
+    if !(0.0..1.0).contains(&a.warmup) {
+        bail!("--warmup {}: expected a fraction in [0, 1)", a.warmup);
+    }
     let sampling = Sampling::parse(&a.sampling).with_context(|| format!("--sampling {}: expected importance or uniform", a.sampling))?;
     let stages = schedule::plan(method, ablation, &schedule_options(&a));
     let name = match ablation {
@@ -295,6 +309,7 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
         patch: a.patch,
         batch: a.batch,
         stages,
+        augment: !a.no_augment,
         val_every: a.val_every,
         val_batch: 8,
         patience: a.patience,

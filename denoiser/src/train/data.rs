@@ -7,9 +7,10 @@ use burn::tensor::Device;
 use renderer::film::descriptors::{field, FIELDS};
 use renderer::film::{exr_io, Descriptors};
 
+use super::augment::{self, Dihedral};
 use super::patches::{self, PatchSampler, Sampling};
 use super::TrainError;
-use crate::preprocess::{prepare, prepare_target, InputTensors, PreparedImage, PreparedTarget, TargetTensors, DESCRIPTOR_CHANNELS};
+use crate::preprocess::{prepare, prepare_target, InputTensors, PreparedImage, PreparedTarget, TargetTensors};
 
 /// One shot: its inputs at every sample count, its target and its patch sampler.
 pub struct Shot {
@@ -190,42 +191,31 @@ impl Dataset {
     }
 }
 
-/// One patch of a batch: shot index (into the split), spp index, corner.
+/// One patch of a batch: shot index (into the split), spp index, corner, and the symmetry it
+/// is moved by (augmentation; the identity for validation).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PatchRef {
     pub shot: usize,
     pub spp: usize,
     pub x: usize,
     pub y: usize,
+    pub t: Dihedral,
 }
 
 /// Cuts a patch: inputs (with the first S descriptor samples if the model needs them) and the
-/// target cropped to the output (`margin` less on each side).
-pub fn cut(shot: &Shot, spp_index: usize, spp: usize, x: usize, y: usize, patch: usize, margin: usize, with_descriptors: bool) -> (PreparedImage, PreparedTarget) {
-    let img = &shot.images[spp_index];
-    let mut crop = img.crop(x, y, patch, patch).expect("patch inside the image");
-    if with_descriptors {
-        if let Some(d) = &shot.descriptors {
-            let (w, h) = (img.width, img.height);
-            let n = w * h;
-            let mut out = Vec::with_capacity(spp * DESCRIPTOR_CHANNELS * patch * patch);
-            for p in 0..spp * DESCRIPTOR_CHANNELS {
-                for row in y..y + patch {
-                    let o = p * n + row * w + x;
-                    out.extend_from_slice(&d[o..o + patch]);
-                }
-            }
-            crop.descriptors = Some(out);
-        }
-    }
+/// target cropped to the output (`margin` less on each side), both moved by `r.t`.
+pub fn cut(shot: &Shot, r: &PatchRef, spp: usize, patch: usize, margin: usize, with_descriptors: bool) -> (PreparedImage, PreparedTarget) {
+    let img = &shot.images[r.spp];
+    let desc = if with_descriptors { shot.descriptors.as_deref().map(|d| (d, spp)) } else { None };
+    let crop = augment::cut_image(img, desc, r.x, r.y, patch, r.t);
     let o = patch - 2 * margin;
-    let t = shot.target.crop(x + margin, y + margin, o, o).expect("target inside the image");
+    let t = augment::cut_target(&shot.target, r.x + margin, r.y + margin, o, r.t);
     (crop, t)
 }
 
 /// Tensors of a batch.
 pub fn batch_tensors(shots: &[Shot], refs: &[PatchRef], spps: &[usize], patch: usize, margin: usize, with_descriptors: bool, device: &Device) -> (InputTensors, TargetTensors) {
-    let cuts: Vec<(PreparedImage, PreparedTarget)> = refs.iter().map(|r| cut(&shots[r.shot], r.spp, spps[r.spp], r.x, r.y, patch, margin, with_descriptors)).collect();
+    let cuts: Vec<(PreparedImage, PreparedTarget)> = refs.iter().map(|r| cut(&shots[r.shot], r, spps[r.spp], patch, margin, with_descriptors)).collect();
     let imgs: Vec<&PreparedImage> = cuts.iter().map(|c| &c.0).collect();
     let tgts: Vec<&PreparedTarget> = cuts.iter().map(|c| &c.1).collect();
     (PreparedImage::to_tensors(&imgs, device), PreparedTarget::to_tensors(&tgts, device))

@@ -5,12 +5,14 @@
 //! - [`data`]: shots of a `pixguide dataset` folder, prepared once; cutting batches.
 //! - [`patches`]: the importance map and patch corners; the validation grid.
 //! - [`schedule`]: stages (branches → finetune; joint) and the ablations.
+//! - [`augment`]: the 8 flips/rotations of a patch, every buffer moved consistently.
 //! - [`checkpoint`]: weight files, optimizer state, run state; atomic writes.
 //!
 //! Determinism: every random draw of step k of stage j (spp, shots, corners, the permutations
 //! of the disentangling loss) comes from `SplitMix64::derive(seed ^ j-tag, k)`, so a run is a
 //! function of (seed, options) and resuming at step k needs no RNG state beyond k.
 
+pub mod augment;
 pub mod checkpoint;
 pub mod data;
 pub mod patches;
@@ -30,6 +32,7 @@ use crate::method::{BranchNets, Method, MethodModel, MethodOutput};
 use crate::model::DenoiserConfig;
 use crate::preprocess::TargetTensors;
 use crate::rng::SplitMix64;
+use augment::Dihedral;
 use checkpoint::{CheckpointPaths, RunState};
 use data::{batch_tensors, Dataset, PatchRef};
 use schedule::{Ablation, Stage, StageKind};
@@ -57,6 +60,8 @@ pub struct TrainOptions {
     pub patch: usize,
     pub batch: usize,
     pub stages: Vec<Stage>,
+    /// Move each training patch by a random one of the 8 flips/rotations ([`augment`]).
+    pub augment: bool,
     /// Validate every this many steps (0 = once per epoch: every training patch of the
     /// non-overlapping grid at every spp seen once, in expectation).
     pub val_every: usize,
@@ -80,14 +85,15 @@ impl TrainOptions {
     /// The parts a resume must agree on.
     fn fingerprint(&self) -> String {
         format!(
-            "{}|{:?}|{:?}|{}|{}|{}|{:?}",
+            "{}|{:?}|{:?}|{}|{}|{}|{:?}{}",
             self.method,
             self.ablation,
             serde_json::to_string(&self.config).unwrap_or_default(),
             self.seed,
             self.patch,
             self.batch,
-            self.stages
+            self.stages,
+            if self.augment { "|augment" } else { "" }
         )
     }
 }
@@ -230,7 +236,8 @@ pub fn draw_batch(data: &Dataset, opts: &TrainOptions, k: usize, step: usize) ->
         .map(|_| {
             let shot = rng.below(data.train.len());
             let (x, y) = data.train[shot].sampler.sample(&mut rng);
-            PatchRef { shot, spp, x, y }
+            let t = if opts.augment { Dihedral(rng.below(8) as u8) } else { Dihedral::IDENTITY };
+            PatchRef { shot, spp, x, y, t }
         })
         .collect();
     (refs, rng)
@@ -248,6 +255,7 @@ pub fn train_step(
     input: crate::preprocess::InputTensors,
     target: &TargetTensors,
     stage: &Stage,
+    lr_factor: f64,
     e_params: &[ParamId],
     rng: &mut SplitMix64,
 ) -> Result<(MethodModel, f32), f32> {
@@ -261,11 +269,11 @@ pub fn train_step(
     let mut model = model;
     if let Some(lr) = stage.lr_e {
         let g = GradientsParams::from_params(&mut grads, &model, e_params);
-        model = optim.step(lr, model, g);
+        model = optim.step(lr * lr_factor, model, g);
     }
     if let Some(lr) = stage.lr_rest {
         let g = GradientsParams::from_grads(grads, &model);
-        model = optim.step(lr, model, g);
+        model = optim.step(lr * lr_factor, model, g);
     }
     Ok((model, value))
 }
@@ -290,7 +298,7 @@ pub fn validate(model: &MethodModel, data: &Dataset, opts: &TrainOptions) -> Opt
     for shot in 0..data.val.len() {
         for spp in 0..data.spps.len() {
             for &(x, y) in &grid {
-                refs.push(PatchRef { shot, spp, x, y });
+                refs.push(PatchRef { shot, spp, x, y, t: Dihedral::IDENTITY });
             }
         }
     }
@@ -392,7 +400,7 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
             let t0 = Instant::now();
             let (refs, mut rng) = draw_batch(data, opts, k, st.step);
             let (input, target) = batch_tensors(&data.train, &refs, &data.spps, opts.patch, margin, with_desc, &crate::cpu_training_device());
-            let (m, loss) = match train_step(model, &mut optim, input, &target, stage, &e_params, &mut rng) {
+            let (m, loss) = match train_step(model, &mut optim, input, &target, stage, stage.lr_factor(st.step), &e_params, &mut rng) {
                 Ok(r) => r,
                 Err(loss) => {
                     return Err(TrainError::NonFinite { loss, stage: stage.kind.name().into(), step: st.step, spp: data.spps[refs[0].spp], patches: describe(data, &refs) });

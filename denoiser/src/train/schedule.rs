@@ -34,6 +34,40 @@ pub struct Stage {
     pub lr_e: Option<f64>,
     /// Weight of L_path (0 = not computed).
     pub w_path: f64,
+    /// How the rates vary over the stage's steps.
+    pub shape: LrShape,
+}
+
+/// How a stage's learning rates vary over its steps.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub enum LrShape {
+    /// The stage's rates throughout (the paper's schedule).
+    Constant,
+    /// Linear warm-up from 1/10 of the rates over the first `warmup` fraction of the steps,
+    /// then cosine decay to 1/50 of them at the last step: a short run spends its first steps
+    /// where a high rate is not yet stable and its last ones settling, instead of ending at the
+    /// peak rate's noise floor.
+    WarmupCosine { warmup: f64 },
+}
+
+impl Stage {
+    /// Multiplier of the stage's rates at 0-based `step`.
+    pub fn lr_factor(&self, step: usize) -> f64 {
+        match self.shape {
+            LrShape::Constant => 1.0,
+            LrShape::WarmupCosine { warmup } => {
+                let n = self.steps.max(1) as f64;
+                let w = (warmup * n).round().max(1.0);
+                let k = step as f64;
+                if k < w {
+                    0.1 + 0.9 * k / w
+                } else {
+                    let t = ((k - w) / (n - w).max(1.0)).min(1.0);
+                    0.02 + 0.98 * 0.5 * (1.0 + (std::f64::consts::PI * t).cos())
+                }
+            }
+        }
+    }
 }
 
 /// The ablations of Seed Table 2 (for the guided method).
@@ -79,6 +113,7 @@ pub struct ScheduleOptions {
     /// scratch would not move within a CPU budget).
     pub lr_scratch: f64,
     pub w_path: f64,
+    pub lr_shape: LrShape,
 }
 
 impl Default for ScheduleOptions {
@@ -95,6 +130,7 @@ impl Default for ScheduleOptions {
             lr_joint_rest: 1e-6,
             lr_scratch: 1e-4,
             w_path: 0.1,
+            lr_shape: LrShape::WarmupCosine { warmup: 0.05 },
         }
     }
 }
@@ -104,18 +140,18 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
     let path = |m: Method| if m.needs_descriptors() { o.w_path } else { 0.0 };
     match (method, ablation) {
         (Method::Guided, None) | (Method::Guided, Some(Ablation::RadianceOnly)) => {
-            vec![Stage { kind: StageKind::Joint, steps: o.joint_steps, lr_rest: Some(o.lr_joint_rest), lr_e: Some(o.lr_joint_e), w_path: o.w_path }]
+            vec![Stage { kind: StageKind::Joint, steps: o.joint_steps, lr_rest: Some(o.lr_joint_rest), lr_e: Some(o.lr_joint_e), w_path: o.w_path, shape: o.lr_shape }]
         }
         (_, Some(Ablation::FixNTrain)) => {
             // Frozen PathNets get no L_path either.
-            vec![Stage { kind: StageKind::Joint, steps: o.joint_steps, lr_rest: None, lr_e: Some(o.lr_joint_e), w_path: 0.0 }]
+            vec![Stage { kind: StageKind::Joint, steps: o.joint_steps, lr_rest: None, lr_e: Some(o.lr_joint_e), w_path: 0.0, shape: o.lr_shape }]
         }
         (_, Some(Ablation::FullNFull)) => {
-            vec![Stage { kind: StageKind::Joint, steps: o.scratch_steps, lr_rest: Some(o.lr_scratch), lr_e: Some(o.lr_scratch), w_path: o.w_path }]
+            vec![Stage { kind: StageKind::Joint, steps: o.scratch_steps, lr_rest: Some(o.lr_scratch), lr_e: Some(o.lr_scratch), w_path: o.w_path, shape: o.lr_shape }]
         }
         (m, _) => vec![
-            Stage { kind: StageKind::Branches, steps: o.branch_steps, lr_rest: Some(o.lr_branches), lr_e: None, w_path: path(m) },
-            Stage { kind: StageKind::Finetune, steps: o.finetune_steps, lr_rest: Some(o.lr_finetune), lr_e: None, w_path: 0.0 },
+            Stage { kind: StageKind::Branches, steps: o.branch_steps, lr_rest: Some(o.lr_branches), lr_e: None, w_path: path(m), shape: o.lr_shape },
+            Stage { kind: StageKind::Finetune, steps: o.finetune_steps, lr_rest: Some(o.lr_finetune), lr_e: None, w_path: 0.0, shape: o.lr_shape },
         ],
     }
 }
@@ -123,4 +159,22 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
 /// Whether the method/ablation starts from pretrained G and P models.
 pub fn needs_pretrained(method: Method, ablation: Option<Ablation>) -> bool {
     method == Method::Guided && ablation != Some(Ablation::FullNFull)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Warm-up from 1/10 to the peak, then a monotone cosine to 1/50 at the last step.
+    #[test]
+    fn warmup_cosine_shape() {
+        let s = Stage { kind: StageKind::Branches, steps: 200, lr_rest: Some(1.0), lr_e: None, w_path: 0.0, shape: LrShape::WarmupCosine { warmup: 0.05 } };
+        assert!((s.lr_factor(0) - 0.1).abs() < 1e-12);
+        assert!((s.lr_factor(10) - 1.0).abs() < 1e-12);
+        assert!((s.lr_factor(199) - 0.02).abs() < 1e-3);
+        let f: Vec<f64> = (0..200).map(|k| s.lr_factor(k)).collect();
+        assert!(f[..10].windows(2).all(|w| w[1] > w[0]) && f[10..].windows(2).all(|w| w[1] <= w[0]));
+        let c = Stage { shape: LrShape::Constant, ..s };
+        assert!((0..200).all(|k| c.lr_factor(k) == 1.0));
+    }
 }

@@ -6,6 +6,7 @@ use crate::preprocess::{prepare, prepare_target, PreparedImage};
 use checkpoint::flat_values;
 use data::Shot;
 use patches::PatchSampler;
+use schedule::LrShape;
 use renderer::film::descriptors::{field, FIELDS};
 use renderer::film::{Descriptors, Frame, PixelBuffer};
 use schedule::ScheduleOptions;
@@ -91,6 +92,7 @@ fn options(method: Method, ablation: Option<Ablation>, sched: &ScheduleOptions) 
         patch: PATCH,
         batch: 2,
         stages: schedule::plan(method, ablation, sched),
+        augment: true,
         val_every: 3,
         val_batch: 4,
         patience: None,
@@ -129,14 +131,14 @@ fn tiny_model_fits_a_fixed_batch() {
     let o = options(Method::P, None, &short());
     let dev = crate::cpu_training_device();
     let mut model = initial_model(&o, None, None, &dev).unwrap();
-    let stage = Stage { kind: StageKind::Branches, steps: 30, lr_rest: Some(1e-3), lr_e: None, w_path: 0.1 };
+    let stage = Stage { kind: StageKind::Branches, steps: 30, lr_rest: Some(1e-3), lr_e: None, w_path: 0.1, shape: LrShape::Constant };
     let (refs, _) = draw_batch(&data, &o, 0, 0);
     let mut optim = optimizer();
     let mut losses = Vec::new();
     for step in 0..30 {
         let (input, target) = batch_tensors(&data.train, &refs, &data.spps, PATCH, o.config.margin(), true, &dev);
         let mut rng = SplitMix64::new(step);
-        let (m, loss) = train_step(model, &mut optim, input, &target, &stage, &[], &mut rng).unwrap();
+        let (m, loss) = train_step(model, &mut optim, input, &target, &stage, 1.0, &[], &mut rng).unwrap();
         model = m;
         losses.push(loss);
     }
