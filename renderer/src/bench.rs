@@ -172,29 +172,60 @@ pub fn embree_script(workspace: &Path) -> PathBuf {
 /// Returns the Python interpreter of the venv at `venv` with embreex and numpy installed,
 /// creating the venv (python3 -m venv; pip install embreex numpy) if it does not work yet.
 pub fn embree_python(venv: &Path) -> Result<PathBuf> {
+    tools_venv(venv, &["embreex", "numpy"], "import embreex.rtcore_scene, numpy").map(|v| v.python)
+}
+
+/// A Python venv holding a tool pixguide borrows (Embree's binding, OIDN's library).
+pub struct ToolsVenv {
+    pub python: PathBuf,
+    /// What the probe printed, trimmed.
+    pub probe: String,
+}
+
+/// The venv at `venv` in which the Python snippet `probe` runs successfully, built (`python3 -m
+/// venv --clear`, then `pip install packages`) when the venv is missing or the probe fails in
+/// it: a half-finished install or a venv whose python3 went away is rebuilt rather than
+/// patched. A lock file beside the venv (`<venv>.lock`) is held meanwhile, so that two processes
+/// (a test and an eval, say) never build the same venv at once.
+pub fn tools_venv(venv: &Path, packages: &[&str], probe: &str) -> Result<ToolsVenv> {
+    let fail = |what: String, detail: &str| Error::Invalid(format!("Python venv {}: {what}{}{}", venv.display(), if detail.is_empty() { "" } else { ": " }, detail));
+    if let Some(dir) = venv.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| fail(format!("creating {}", dir.display()), &e.to_string()))?;
+    }
+    let lock_path = venv.with_extension("lock");
+    let lock = std::fs::OpenOptions::new().create(true).truncate(false).write(true).open(&lock_path).map_err(|e| fail(format!("opening {}", lock_path.display()), &e.to_string()))?;
+    lock.lock().map_err(|e| fail(format!("locking {}", lock_path.display()), &e.to_string()))?;
     let python = venv.join("bin/python");
-    let works = |py: &Path| {
-        Command::new(py).args(["-c", "import embreex.rtcore_scene, numpy"]).output().map(|o| o.status.success()).unwrap_or(false)
-    };
-    if python.exists() && works(&python) {
-        return Ok(python);
+    let run_probe = || Command::new(&python).args(["-c", probe]).output();
+    if let Ok(out) = run_probe() {
+        if out.status.success() {
+            return Ok(ToolsVenv { python, probe: String::from_utf8_lossy(&out.stdout).trim().to_string() });
+        }
     }
-    let fail = |what: &str, detail: String| Error::Invalid(format!("Embree venv {}: {what}: {detail}", venv.display()));
-    let out = Command::new("python3").arg("-m").arg("venv").arg(venv).output().map_err(|e| fail("python3 -m venv", e.to_string()))?;
+    let out = Command::new("python3").args(["-m", "venv", "--clear"]).arg(venv).output().map_err(|e| fail("python3 -m venv".into(), &e.to_string()))?;
     if !out.status.success() {
-        return Err(fail("python3 -m venv failed", String::from_utf8_lossy(&out.stderr).into_owned()));
+        return Err(fail("python3 -m venv failed".into(), &last_line(&out.stderr)));
     }
+    let install = format!("pip install {}", packages.join(" "));
     let out = Command::new(venv.join("bin/pip"))
-        .args(["install", "--quiet", "--disable-pip-version-check", "embreex", "numpy"])
+        .args(["install", "--quiet", "--disable-pip-version-check"])
+        .args(packages)
         .output()
-        .map_err(|e| fail("pip install embreex numpy", e.to_string()))?;
+        .map_err(|e| fail(install.clone(), &e.to_string()))?;
     if !out.status.success() {
-        return Err(fail("pip install embreex numpy failed", String::from_utf8_lossy(&out.stderr).into_owned()));
+        return Err(fail(format!("{install} failed"), &last_line(&out.stderr)));
     }
-    if !works(&python) {
-        return Err(fail("embreex installed but does not import", String::new()));
+    let out = run_probe().map_err(|e| fail(format!("running {}", python.display()), &e.to_string()))?;
+    if !out.status.success() {
+        return Err(fail(format!("{install} done, but the probe `{probe}` fails"), &last_line(&out.stderr)));
     }
-    Ok(python)
+    Ok(ToolsVenv { python, probe: String::from_utf8_lossy(&out.stdout).trim().to_string() })
+}
+
+/// The last non-empty line of a tool's error output: pip and Python put the actual error there,
+/// after pages of context that would drown a one-line message.
+fn last_line(stderr: &[u8]) -> String {
+    String::from_utf8_lossy(stderr).lines().map(str::trim).rfind(|l| !l.is_empty()).unwrap_or("").to_string()
 }
 
 /// Traces `batch` against `mesh` with Embree via `script`, exchanging binary files in `work_dir`.
