@@ -23,6 +23,7 @@
 //! - [`metrics`]: relMSE, 1 − SSIM, relMSE_val (method.md §7.3).
 //! - [`weights`]: weight files (safetensors, module-path names, config + provenance metadata).
 //! - [`train`]: data, patch sampling, the staged schedule, checkpoints (docs/training.md).
+//! - [`oidn`]: Intel Open Image Denoise, loaded at run time, as a baseline denoiser.
 //! - [`layers`]: convolution with deterministic init, input sanitising, cropping.
 
 pub mod column;
@@ -36,6 +37,7 @@ pub mod method;
 pub mod metrics;
 pub mod model;
 pub mod mskp;
+pub mod oidn;
 pub mod pathnet;
 pub mod preprocess;
 pub mod rng;
