@@ -21,9 +21,10 @@ pub struct DenoiseArgs {
     #[arg(long)]
     pub descriptors: Option<PathBuf>,
     /// Denoiser: guided (the paper's method), g (KPCN on G-buffers), p (KPCN on P-buffers),
-    /// both (KPCN on G- and P-buffers).
-    #[arg(long, default_value = "guided", value_parser = parse_method)]
-    pub model: Method,
+    /// both (KPCN on G- and P-buffers), or oidn (Intel Open Image Denoise, the baseline; installed
+    /// into target/oidn-venv from PyPI the first time).
+    #[arg(long, default_value = "guided", value_parser = parse_model)]
+    pub model: Model,
     /// Weight file (default: denoiser/weights/<model>-default.safetensors).
     #[arg(long)]
     pub weights: Option<PathBuf>,
@@ -62,8 +63,18 @@ impl InferArgs {
     }
 }
 
-pub fn parse_method(s: &str) -> std::result::Result<Method, String> {
-    Method::parse(s).ok_or_else(|| format!("unknown model `{s}` (expected guided, g, p or both)"))
+/// A denoiser the commands can run: one of our networks, or Open Image Denoise.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Model {
+    Net(Method),
+    Oidn,
+}
+
+pub fn parse_model(s: &str) -> std::result::Result<Model, String> {
+    if s == "oidn" {
+        return Ok(Model::Oidn);
+    }
+    Method::parse(s).map(Model::Net).ok_or_else(|| format!("unknown model `{s}` (expected guided, g, p, both or oidn)"))
 }
 
 /// Where the shipped weights of `method` live: `denoiser/weights/<method>-default.safetensors`
@@ -221,8 +232,12 @@ pub fn print_denoise_summary(loaded: &Loaded, run: &DenoiseRun) {
 }
 
 pub fn run(a: DenoiseArgs) -> Result<()> {
+    let method = match a.model {
+        Model::Net(m) => m,
+        Model::Oidn => return run_oidn(&a),
+    };
     // Weights first: a missing file should not cost the time of reading a large frame.
-    let loaded = load_weights(a.model, a.weights.as_deref())?;
+    let loaded = load_weights(method, a.weights.as_deref())?;
     let mut frame = film::exr_io::read_frame(&a.frame).with_context(|| format!("reading {}", a.frame.display()))?;
     for (name, b) in [("diffuse", &frame.diffuse), ("specular", &frame.specular), ("albedo", &frame.albedo), ("normal", &frame.normal), ("depth", &frame.depth)] {
         if b.is_none() {
@@ -264,6 +279,28 @@ pub fn run(a: DenoiseArgs) -> Result<()> {
         let reference = read_reference(r, frame.width, frame.height)?;
         println!("{}", error_line("noisy", &frame.radiance.mean, &reference));
         println!("{}", error_line("denoised", &run.denoised.radiance, &reference));
+    }
+    Ok(())
+}
+
+/// `pixguide denoise --model oidn`: OIDN needs only the radiance, albedo and normal.
+fn run_oidn(a: &DenoiseArgs) -> Result<()> {
+    if a.weights.is_some() {
+        bail!("--weights does not apply to --model oidn (OIDN brings its own weights)");
+    }
+    if a.weights_png.is_some() {
+        bail!("--weights-png needs --model guided (only the guided model blends two denoisers)");
+    }
+    // The library before the frame: a failed install should not cost the time of reading it.
+    let (oidn, load_s) = super::oidn_setup::load()?;
+    let frame = film::exr_io::read_frame(&a.frame).with_context(|| format!("reading {}", a.frame.display()))?;
+    let d = super::oidn_setup::denoise_frame(&oidn, &frame).with_context(|| format!("denoising {}", a.frame.display()))?;
+    super::oidn_setup::print_summary(&oidn, load_s, &d);
+    write_outputs(&d, frame.spp, &a.output, a.png.as_deref(), None)?;
+    if let Some(r) = &a.reference {
+        let reference = read_reference(r, frame.width, frame.height)?;
+        println!("{}", error_line("noisy", &frame.radiance.mean, &reference));
+        println!("{}", error_line("denoised", &d.radiance, &reference));
     }
     Ok(())
 }

@@ -10,3 +10,4 @@ pub mod denoise;
 pub mod eval;
 pub mod eval_plot;
 pub mod eval_report;
+pub mod oidn_setup;

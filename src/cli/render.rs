@@ -1,6 +1,6 @@
 //! `pixguide render`.
 
-use super::denoise::{self as dn, InferArgs};
+use super::denoise::{self as dn, InferArgs, Model};
 use super::progress;
 use anyhow::{Context, Result};
 use clap::Args;
@@ -8,6 +8,8 @@ use renderer::film::{self, BufferRequest, Frame};
 use renderer::integrator::{self, RenderOptions};
 use renderer::scene::Scene;
 use denoiser::method::Method;
+use denoiser::oidn::Oidn;
+use denoiser::weights::Loaded;
 use std::path::{Path, PathBuf};
 
 #[derive(Args)]
@@ -39,9 +41,10 @@ pub struct RenderArgs {
     /// descriptors in `<output>.descriptors.safetensors`, a PNG of each buffer and a contact sheet.
     #[arg(long)]
     pub aovs: bool,
-    /// Denoise in the same process: guided (the paper's method), g, p, both, or none. `-o` and
-    /// `--png` then get the denoised image. Records only the buffers the model needs (per-sample
-    /// descriptors only for p, both and guided).
+    /// Denoise in the same process: guided (the paper's method), g, p, both, oidn (Intel Open
+    /// Image Denoise, the baseline), or none. `-o` and `--png` then get the denoised image.
+    /// Records only the buffers the model needs (per-sample descriptors only for p, both and
+    /// guided).
     #[arg(long, default_value = "none", value_parser = parse_denoise)]
     pub denoise: DenoiseModel,
     /// Weight file for --denoise (default: denoiser/weights/<model>-default.safetensors).
@@ -67,22 +70,39 @@ pub struct RenderArgs {
 /// `--denoise` value: a model, or none. (A newtype because clap reads `Option<T>` fields as
 /// "flag may be absent", not as a value that can be "none".)
 #[derive(Clone, Copy, Debug)]
-pub struct DenoiseModel(pub Option<Method>);
+pub struct DenoiseModel(pub Option<Model>);
 
 fn parse_denoise(s: &str) -> std::result::Result<DenoiseModel, String> {
     if s == "none" {
         Ok(DenoiseModel(None))
     } else {
-        dn::parse_method(s).map(|m| DenoiseModel(Some(m)))
+        dn::parse_model(s).map(|m| DenoiseModel(Some(m)))
     }
 }
 
+/// The denoiser of `--denoise`, ready to run.
+enum Denoiser {
+    Net(Loaded),
+    /// With the seconds its loading took.
+    Oidn(Oidn, f64),
+}
+
 pub fn run(a: RenderArgs) -> Result<()> {
-    if a.weights_png.is_some() && a.denoise.0 != Some(Method::Guided) {
+    if a.weights_png.is_some() && a.denoise.0 != Some(Model::Net(Method::Guided)) {
         anyhow::bail!("--weights-png needs --denoise guided (only the guided model blends two denoisers)");
     }
-    // Weights before the render, so that a missing file costs nothing.
-    let loaded = a.denoise.0.map(|m| dn::load_weights(m, a.weights.as_deref())).transpose()?;
+    // Weights (or OIDN) before the render, so that a missing file costs nothing.
+    let loaded = match a.denoise.0 {
+        None => None,
+        Some(Model::Net(m)) => Some(Denoiser::Net(dn::load_weights(m, a.weights.as_deref())?)),
+        Some(Model::Oidn) => {
+            if a.weights.is_some() {
+                anyhow::bail!("--weights does not apply to --denoise oidn (OIDN brings its own weights)");
+            }
+            let (oidn, load_s) = super::oidn_setup::load()?;
+            Some(Denoiser::Oidn(oidn, load_s))
+        }
+    };
     for out in [Some(&a.output), a.png.as_ref(), a.noisy.as_ref()].into_iter().flatten() {
         if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).with_context(|| format!("creating the output folder {}", dir.display()))?;
@@ -95,7 +115,8 @@ pub fn run(a: RenderArgs) -> Result<()> {
     }
     let request = match (a.aovs, a.denoise.0) {
         (true, _) => BufferRequest::ALL,
-        (false, Some(m)) => BufferRequest { split: true, gbuffers: true, descriptors: m.needs_descriptors() },
+        (false, Some(Model::Net(m))) => BufferRequest { split: true, gbuffers: true, descriptors: m.needs_descriptors() },
+        (false, Some(Model::Oidn)) => BufferRequest { split: false, gbuffers: true, descriptors: false },
         (false, None) => BufferRequest::RADIANCE_ONLY,
     };
     let mut opts = RenderOptions::from_scene(&scene, request);
@@ -135,16 +156,26 @@ pub fn run(a: RenderArgs) -> Result<()> {
     if let Some(noisy) = &a.noisy {
         film::exr_io::write_frame(&frame, noisy)?;
     }
-    let run = dn::denoise_frame(&mut frame, &loaded, &a.infer.options())?;
-    dn::print_denoise_summary(&loaded, &run);
-    dn::write_outputs(&run.denoised, frame.spp, &a.output, None, a.weights_png.as_deref())?;
+    let denoised = match loaded {
+        Denoiser::Net(loaded) => {
+            let run = dn::denoise_frame(&mut frame, &loaded, &a.infer.options())?;
+            dn::print_denoise_summary(&loaded, &run);
+            run.denoised
+        }
+        Denoiser::Oidn(oidn, load_s) => {
+            let d = super::oidn_setup::denoise_frame(&oidn, &frame)?;
+            super::oidn_setup::print_summary(&oidn, load_s, &d);
+            d
+        }
+    };
+    dn::write_outputs(&denoised, frame.spp, &a.output, None, a.weights_png.as_deref())?;
     if let Some(png) = &a.png {
-        film::png::write_radiance(png, frame.width, frame.height, &run.denoised.radiance, a.exposure)?;
+        film::png::write_radiance(png, frame.width, frame.height, &denoised.radiance, a.exposure)?;
     }
     if let Some(r) = &a.reference {
         let reference = dn::read_reference(r, frame.width, frame.height)?;
         println!("{}", dn::error_line("noisy", &frame.radiance.mean, &reference));
-        println!("{}", dn::error_line("denoised", &run.denoised.radiance, &reference));
+        println!("{}", dn::error_line("denoised", &denoised.radiance, &reference));
     }
     Ok(())
 }
