@@ -78,9 +78,11 @@ fn eval_tiny_configuration_writes_the_page_and_resumes() {
     assert!(noisy[2].parse::<f64>().unwrap() < 1.0, "{noisy:?}");
     // Per-scene tables, times and the breakdown are there; methods not asked for are absent.
     assert!(md.contains("| cornell-box | 0.") && md.contains("| **mean** |"));
+    // method, render, preprocessing, D_G, D_P, E + blend, tiling, OIDN filter (– for guided), total.
     let bd = row(&md, "## Runtime breakdown", "2");
-    assert_eq!(bd.len(), 7, "{bd:?}");
-    assert!(bd.iter().all(|c| c.parse::<f64>().is_ok_and(|v| v >= 0.0)), "{bd:?}");
+    assert_eq!(bd.len(), 9, "{bd:?}");
+    assert_eq!((bd[0], bd[7]), ("guided", "–"), "{bd:?}");
+    assert!(bd[1..7].iter().chain([&bd[8]]).all(|c| c.parse::<f64>().is_ok_and(|v| v >= 0.0)), "{bd:?}");
     assert!(!md.contains("KPCN-P") && md.contains("cores (`nproc`)") && md.contains("--methods noisy,g,guided"));
 
     // PNGs: plots and the three picture sheets, decodable and of the documented sizes.

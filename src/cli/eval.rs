@@ -10,6 +10,7 @@ use clap::Args;
 use denoiser::infer::{self, Denoised};
 use denoiser::method::Method;
 use denoiser::metrics;
+use denoiser::oidn::Oidn;
 use denoiser::preprocess::{self, PreparedImage};
 use denoiser::weights::{self, Loaded};
 use renderer::film::{BufferRequest, Frame};
@@ -31,8 +32,10 @@ pub struct EvalArgs {
     #[arg(long, default_value = "2,4,8,16,32,64", value_delimiter = ',')]
     pub spp: Vec<u32>,
     /// Methods: noisy (plain Monte Carlo, always measured: it normalises the errors), g, p, both,
-    /// guided, guided-half, fix-n-train, full-n-full, radiance-only.
-    #[arg(long, default_value = "noisy,g,p,both,guided,guided-half,fix-n-train,full-n-full,radiance-only", value_delimiter = ',')]
+    /// guided, guided-half, fix-n-train, full-n-full, radiance-only, oidn (Intel Open Image
+    /// Denoise, the baseline: installed into target/oidn-venv from PyPI the first time, and left
+    /// out with one line saying why if that fails).
+    #[arg(long, default_value = "noisy,g,p,both,guided,guided-half,fix-n-train,full-n-full,radiance-only,oidn", value_delimiter = ',')]
     pub methods: Vec<String>,
     /// Folder of the weight files (`<method>-default.safetensors`, `guided-half.safetensors`, …:
     /// the names `pixguide train --all` writes).
@@ -54,7 +57,7 @@ pub struct EvalArgs {
     /// Scene of the runtime breakdown (default: the first of --scenes).
     #[arg(long)]
     pub breakdown_scene: Option<String>,
-    /// Test scenes shown in pictures (noisy / G / P / both / guided / reference, error and W_G
+    /// Test scenes shown in pictures (noisy / G / P / both / guided / OIDN / reference, error and W_G
     /// maps), or `none` [default: those of cornell-box, glass-still-life that --scenes lists].
     #[arg(long, value_delimiter = ',')]
     pub pictures: Option<Vec<String>>,
@@ -81,7 +84,13 @@ pub const KNOWN: [(&str, &str, &str); 8] = [
 ];
 
 /// Methods shown in the pictures, in order.
-pub const PICTURE_METHODS: [&str; 5] = ["noisy", "g", "p", "both", "guided"];
+pub const PICTURE_METHODS: [&str; 6] = ["noisy", "g", "p", "both", "guided", "oidn"];
+
+/// Label of the OIDN baseline in tables and plots.
+pub const OIDN_LABEL: &str = "OIDN";
+
+/// Methods of the runtime breakdown, in its row order per spp.
+pub const BREAKDOWN_METHODS: [&str; 2] = ["guided", "oidn"];
 
 /// The spp whose noisy error normalises every other (method.md §7.3).
 pub const NORM_SPP: u32 = 2;
@@ -90,11 +99,14 @@ pub const NORM_SPP: u32 = 2;
 pub struct MethodSpec {
     pub name: String,
     pub label: String,
-    /// Weight file (None for noisy).
+    /// Weight file (None for noisy and OIDN).
     pub file: Option<PathBuf>,
-    /// Identity of the weights (size and FNV-1a hash of the file), "mc" for noisy.
+    /// Identity of the weights (size and FNV-1a hash of the file), "mc" for noisy, OIDN's
+    /// version and settings for OIDN.
     pub id: String,
     pub loaded: Option<Loaded>,
+    /// The OIDN baseline's library, loaded once per run.
+    pub oidn: Option<Oidn>,
     /// Why the method is not evaluated, e.g. "no denoiser/weights/both-default.safetensors".
     pub missing: Option<String>,
 }
@@ -179,8 +191,8 @@ fn file_id(path: &Path) -> Result<String> {
 fn methods(a: &EvalArgs) -> Result<Vec<MethodSpec>> {
     let mut names: Vec<String> = vec!["noisy".into()];
     for m in a.methods.iter().map(|s| s.trim()).filter(|s| !s.is_empty()) {
-        if m != "noisy" && !KNOWN.iter().any(|k| k.0 == m) {
-            bail!("--methods: unknown method `{m}` (expected noisy, {})", KNOWN.map(|k| k.0).join(", "));
+        if m != "noisy" && m != "oidn" && !KNOWN.iter().any(|k| k.0 == m) {
+            bail!("--methods: unknown method `{m}` (expected noisy, {}, oidn)", KNOWN.map(|k| k.0).join(", "));
         }
         if !names.iter().any(|n| n == m) {
             names.push(m.to_string());
@@ -189,14 +201,26 @@ fn methods(a: &EvalArgs) -> Result<Vec<MethodSpec>> {
     let device = denoiser::cpu_device();
     let mut out = Vec::new();
     for name in names {
+        if name == "oidn" {
+            let label = OIDN_LABEL.to_string();
+            match super::oidn_setup::load() {
+                Ok((o, _)) => out.push(MethodSpec { name, label, file: None, id: super::oidn_setup::method_id(&o), loaded: None, oidn: Some(o), missing: None }),
+                Err(e) => {
+                    // One line, and the run goes on without it: the baseline is optional.
+                    eprintln!("eval: leaving out OIDN: {e:#}");
+                    out.push(MethodSpec { name, label, file: None, id: String::new(), loaded: None, oidn: None, missing: Some(format!("{e:#}")) });
+                }
+            }
+            continue;
+        }
         let Some(&(_, stem, label)) = KNOWN.iter().find(|k| k.0 == name) else {
-            out.push(MethodSpec { name, label: "noisy (MC)".into(), file: None, id: "mc".into(), loaded: None, missing: None });
+            out.push(MethodSpec { name, label: "noisy (MC)".into(), file: None, id: "mc".into(), loaded: None, oidn: None, missing: None });
             continue;
         };
         let file = a.weights_dir.join(format!("{stem}.safetensors"));
         if !file.exists() {
             let missing = Some(format!("no {}", file.display()));
-            out.push(MethodSpec { name: name.clone(), label: label.into(), file: Some(file), id: String::new(), loaded: None, missing });
+            out.push(MethodSpec { name: name.clone(), label: label.into(), file: Some(file), id: String::new(), loaded: None, oidn: None, missing });
             continue;
         }
         let loaded = weights::load(&file, &device).with_context(|| format!("loading the {name} weights"))?;
@@ -205,7 +229,7 @@ fn methods(a: &EvalArgs) -> Result<Vec<MethodSpec>> {
             bail!("{} holds weights of the {} model, but `{name}` needs {expect} weights", file.display(), loaded.method);
         }
         let id = file_id(&file)?;
-        out.push(MethodSpec { name, label: label.into(), file: Some(file), id, loaded: Some(loaded), missing: None });
+        out.push(MethodSpec { name, label: label.into(), file: Some(file), id, loaded: Some(loaded), oidn: None, missing: None });
     }
     Ok(out)
 }
@@ -431,14 +455,14 @@ pub fn run(a: EvalArgs) -> Result<()> {
             }
         }
     }
-    let guided = methods.iter().position(|m| m.name == "guided" && m.available());
+    // The breakdown: (method, spp) of guided and of the OIDN baseline.
     let mut breakdown_todo = Vec::new();
     if a.breakdown_size > 0 {
-        if let Some(g) = guided {
+        for g in (0..methods.len()).filter(|&i| BREAKDOWN_METHODS.contains(&methods[i].name.as_str()) && methods[i].available()) {
             for &spp in &a.spp {
-                let k = key("breakdown", &breakdown_scene, spp, "guided", &methods[g].id, a.seed, a.breakdown_size, a.breakdown_size);
+                let k = key("breakdown", &breakdown_scene, spp, &methods[g].name, &methods[g].id, a.seed, a.breakdown_size, a.breakdown_size);
                 if cache.get(&k).is_none() {
-                    breakdown_todo.push(spp);
+                    breakdown_todo.push((g, spp));
                 } else {
                     cached += 1;
                 }
@@ -458,6 +482,8 @@ pub fn run(a: EvalArgs) -> Result<()> {
     };
     let (mut renders, mut measured) = (0usize, 0usize);
     let mut load_samples = Vec::new();
+    // Whether OIDN has had its untimed warm-up run.
+    let mut oidn_warm = false;
     let mut loaded_scene: Option<(usize, Scene)> = None;
     let mut reference: Option<(usize, Frame)> = None;
     for job in &jobs {
@@ -519,12 +545,19 @@ pub fn run(a: EvalArgs) -> Result<()> {
             };
             let image: Vec<f32>;
             let mut wg = None;
-            match &m.loaded {
-                None => {
+            match (&m.oidn, &m.loaded) {
+                (Some(o), _) => {
+                    let d = super::oidn_setup::denoise_timed(o, frame, &mut oidn_warm)
+                        .with_context(|| format!("denoising {} at {} spp with OIDN", s.name, job.spp))?;
+                    r.denoise_s = d.timings.total_s;
+                    r.time_s = render_s + r.denoise_s;
+                    image = d.radiance;
+                }
+                (None, None) => {
                     image = frame.radiance.mean.clone();
                     r.time_s = *render_s;
                 }
-                Some(l) => {
+                (None, Some(l)) => {
                     let td = Instant::now();
                     let d: Denoised = infer::denoise(&l.model, &l.config, prepared, &frame.radiance.mean, &opts, &device)
                         .with_context(|| format!("denoising {} at {} spp with {}", s.name, job.spp, m.name))?;
@@ -563,47 +596,47 @@ pub fn run(a: EvalArgs) -> Result<()> {
         }
     }
 
-    if let (false, Some(g)) = (breakdown_todo.is_empty(), guided) {
+    if !breakdown_todo.is_empty() {
         let s = &scenes[breakdown_idx];
         let size = a.breakdown_size;
         let scene = load_scene(s, size, size)?;
-        let m = &methods[g];
-        let l = m.loaded.as_ref().expect("available");
-        for &spp in &breakdown_todo {
-            pb.set_message(format!("breakdown {spp} spp"));
-            let (mut frame, render_s) = render(&scene, spp, a.seed, true)?;
+        for &(g, spp) in &breakdown_todo {
+            let m = &methods[g];
+            pb.set_message(format!("breakdown {} {spp} spp", m.name));
+            let (mut frame, render_s) = render(&scene, spp, a.seed, m.needs_descriptors())?;
             renders += 1;
-            let tp = Instant::now();
-            let prepared = preprocess::prepare_for_inference(&mut frame)?;
-            let prepare_s = tp.elapsed().as_secs_f64();
-            let td = Instant::now();
-            let d = infer::denoise(&l.model, &l.config, &prepared, &frame.radiance.mean, &opts, &device)?;
-            let denoise_s = td.elapsed().as_secs_f64();
-            let t = &d.timings;
-            let r = Record {
+            let mut r = Record {
                 kind: "breakdown".into(),
                 scene: s.name.clone(),
                 spp,
-                method: "guided".into(),
+                method: m.name.clone(),
                 weights: m.id.clone(),
                 seed: a.seed,
                 width: size,
                 height: size,
                 render_s,
-                prepare_s,
-                denoise_s,
-                time_s: render_s + prepare_s + denoise_s,
-                gather_s: t.gather_s,
-                d_g_s: t.d_g_s,
-                d_p_s: t.d_p_s,
-                e_s: t.e_s,
-                readback_s: t.readback_s,
-                date: super::train::iso_date_utc(),
-                load1: load1(),
                 ..Default::default()
             };
+            if let Some(o) = &m.oidn {
+                r.denoise_s = super::oidn_setup::denoise_timed(o, &frame, &mut oidn_warm)?.timings.total_s;
+                r.time_s = render_s + r.denoise_s;
+                say(format!("breakdown {} {size}² {spp:>2} spp OIDN: render {render_s:.2} s, filter {:.2} s", s.name, r.denoise_s));
+            } else {
+                let l = m.loaded.as_ref().expect("available");
+                let tp = Instant::now();
+                let prepared = preprocess::prepare_for_inference(&mut frame)?;
+                r.prepare_s = tp.elapsed().as_secs_f64();
+                let td = Instant::now();
+                let d = infer::denoise(&l.model, &l.config, &prepared, &frame.radiance.mean, &opts, &device)?;
+                r.denoise_s = td.elapsed().as_secs_f64();
+                r.time_s = render_s + r.prepare_s + r.denoise_s;
+                let t = &d.timings;
+                (r.gather_s, r.d_g_s, r.d_p_s, r.e_s, r.readback_s) = (t.gather_s, t.d_g_s, t.d_p_s, t.e_s, t.readback_s);
+                say(format!("breakdown {} {size}² {spp:>2} spp: render {:.2} s, preprocess {:.2} s, D_G {:.2} s, D_P {:.2} s, E {:.2} s", s.name, render_s, r.prepare_s, r.d_g_s, r.d_p_s, r.e_s));
+            }
+            r.date = super::train::iso_date_utc();
+            r.load1 = load1();
             load_samples.push(r.load1);
-            say(format!("breakdown {} {size}² {spp:>2} spp: render {:.2} s, preprocess {:.2} s, D_G {:.2} s, D_P {:.2} s, E {:.2} s", s.name, render_s, prepare_s, r.d_g_s, r.d_p_s, r.e_s));
             cache.put(r)?;
             measured += 1;
             pb.inc(1);

@@ -1,6 +1,6 @@
 //! docs/results.md, its plots and its pictures, from the measurements of `pixguide eval`.
 
-use super::eval::{self, EvalArgs, MethodSpec, Outcome, PictureData, Record, NORM_SPP, PICTURE_METHODS};
+use super::eval::{self, EvalArgs, MethodSpec, Outcome, PictureData, Record, BREAKDOWN_METHODS, NORM_SPP, PICTURE_METHODS};
 use super::eval_plot::{self, Curve};
 use anyhow::{Context, Result};
 use denoiser::metrics::{self, ToneMap};
@@ -132,23 +132,37 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
     )?;
     writeln!(
         w,
-        "Each (scene, spp) is rendered twice with the same seed: without per-sample path descriptors (the input of noisy and KPCN-G) and with them \
+        "Each (scene, spp) is rendered twice with the same seed: without per-sample path descriptors (the input of noisy, KPCN-G and OIDN) and with them \
          (every model with a path-manifold module); the command checks that both give the same radiance. **Time of a method** = wall seconds of \
-         its render + preprocessing + tiled inference, measured; noisy = its render alone.\n"
+         its render + preprocessing + tiled inference, measured; noisy = its render alone; OIDN = its render + OIDN's filter (commit + execute, \
+         after one untimed warm-up run per eval run), without loading the library and creating OIDN's device, done once per run.\n"
+    )?;
+    writeln!(
+        w,
+        "**OIDN** is a baseline outside the paper: Intel Open Image Denoise, a production denoiser with its own pretrained weights (trained by \
+         Intel on its own data, not on our dataset), on the same noisy radiance with our albedo and normal G-buffers. `pixguide eval` installs it \
+         the first time (a Python venv at `target/oidn-venv`, `pip install {}`: the wheel ships the C library) and calls its C API in process; \
+         Python is only the installer.\n",
+        super::oidn_setup::PACKAGE
     )?;
     writeln!(w, "| method | weights | status |\n|---|---|---|")?;
     for m in &o.methods {
-        let file = m.file.as_ref().map(|p| format!("`{}`", p.display())).unwrap_or_else(|| "–".into());
-        let status = match (&m.missing, &m.loaded) {
-            (Some(why), _) => format!("not available ({why})"),
-            (None, Some(l)) => format!(
+        let file = match (&m.file, m.name.as_str()) {
+            (Some(p), _) => format!("`{}`", p.display()),
+            (None, "oidn") => "its own, built into the library".into(),
+            (None, _) => "–".into(),
+        };
+        let status = match (&m.missing, &m.loaded, &m.oidn) {
+            (Some(why), ..) => format!("not available ({why})"),
+            (None, Some(l), _) => format!(
                 "{} model, preset {}, {} training steps, validation relMSE {:.4}",
                 l.method,
                 if l.preset.is_empty() { "?" } else { &l.preset },
                 l.provenance.steps,
                 l.provenance.validation_rel_mse
             ),
-            (None, None) => "plain Monte Carlo, no denoising".into(),
+            (None, None, Some(o)) => super::oidn_setup::describe(o),
+            (None, None, None) => "plain Monte Carlo, no denoising".into(),
         };
         writeln!(w, "| {} | {file} | {status} |", m.label)?;
     }
@@ -226,26 +240,38 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
 
     // Breakdown.
     writeln!(w, "\n## Runtime breakdown (the paper's Table 1)\n")?;
-    let guided = o.methods.iter().find(|m| m.name == "guided");
-    match guided {
-        Some(g) if g.available() && a.breakdown_size > 0 => {
-            let size = a.breakdown_size;
-            writeln!(
-                w,
-                "The guided model on {} rendered at {size}×{size} with descriptors, wall seconds. D_P includes the path-manifold modules; \
-                 E + blend includes recombining the two branches; tiling = cutting windows out of the prepared image and reading results back. \
-                 Columns of the two branches (diffuse, specular) are summed.\n",
-                o.breakdown_scene
-            )?;
-            writeln!(w, "| spp | render | preprocessing | D_G | D_P (with path module) | E + blend | tiling | total |\n|---|---|---|---|---|---|---|---|")?;
-            for &spp in &spps {
-                let k = o.records.values().find(|r| {
-                    r.kind == "breakdown" && r.scene == o.breakdown_scene && r.spp == spp && r.weights == g.id && r.seed == a.seed && r.width == size && r.height == size
+    let asked: Vec<&MethodSpec> = BREAKDOWN_METHODS.iter().filter_map(|n| o.methods.iter().find(|m| m.name == *n)).collect();
+    if a.breakdown_size == 0 || asked.is_empty() {
+        writeln!(w, "Not measured (`--breakdown-size 0`, or neither guided nor oidn among `--methods`).")?;
+    }
+    for m in asked.iter().filter(|m| a.breakdown_size > 0 && !m.available()) {
+        writeln!(w, "{}: not available ({}).\n", m.label, m.missing.clone().unwrap_or_default())?;
+    }
+    let shown: Vec<&&MethodSpec> = asked.iter().filter(|m| a.breakdown_size > 0 && m.available()).collect();
+    if !shown.is_empty() {
+        let size = a.breakdown_size;
+        writeln!(
+            w,
+            "Wall seconds on {1} rendered at {size}×{size}, for {0}. The guided model renders with descriptors; D_P includes the path-manifold modules; \
+             E + blend includes recombining the two branches; tiling = cutting windows out of the prepared image and reading results back; columns \
+             of the two branches (diffuse, specular) are summed. OIDN renders without descriptors; its filter = OIDN's RT filter, commit + execute.\n",
+            shown.iter().map(|m| m.label.as_str()).collect::<Vec<_>>().join(" and "),
+            o.breakdown_scene
+        )?;
+        writeln!(w, "| spp | method | render | preprocessing | D_G | D_P (with path module) | E + blend | tiling | OIDN filter | total |\n|---|---|---|---|---|---|---|---|---|---|")?;
+        for &spp in &spps {
+            for m in &shown {
+                let found = o.records.values().find(|r| {
+                    r.kind == "breakdown" && r.method == m.name && r.scene == o.breakdown_scene && r.spp == spp && r.weights == m.id && r.seed == a.seed && r.width == size && r.height == size
                 });
-                if let Some(r) = k {
+                let Some(r) = found else { continue };
+                if m.oidn.is_some() {
+                    writeln!(w, "| {spp} | {} | {:.2} | – | – | – | – | – | {:.2} | {:.2} |", m.label, r.render_s, r.denoise_s, r.time_s)?;
+                } else {
                     writeln!(
                         w,
-                        "| {spp} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
+                        "| {spp} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | – | {:.2} |",
+                        m.label,
                         r.render_s,
                         r.prepare_s,
                         r.d_g_s,
@@ -257,8 +283,6 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
                 }
             }
         }
-        Some(g) if !g.available() => writeln!(w, "Needs the guided model: not available ({}).", g.missing.clone().unwrap_or_default())?,
-        _ => writeln!(w, "Not measured (`--breakdown-size 0` or guided not among `--methods`).")?,
     }
 
     // Per scene.
