@@ -256,11 +256,26 @@ fn eval_has_an_oidn_row_curve_and_panel() {
         "--out",
         s(&out),
     ];
-    let first = ok(&pixguide(&args), "eval");
-    // noisy and OIDN at 2 and 4 spp, plus two OIDN breakdown rows; one render per (scene, spp)
-    // and one per breakdown spp.
+    // A page without OIDN first, as before this baseline existed: its picture has noisy and
+    // the reference only.
+    let noisy_only: Vec<&str> = args
+        .iter()
+        .map(|a| if *a == "noisy,oidn" { "noisy" } else { a })
+        .collect();
+    let before = ok(&pixguide(&noisy_only), "eval without oidn");
     assert!(
-        first.contains("eval: 6 measured, 0 cached, 4 renders"),
+        before.contains("eval: 2 measured, 0 cached, 2 renders"),
+        "{before}"
+    );
+    let picture = base.join("out/results/cornell-box-2spp-images.png");
+    assert_eq!(image::open(&picture).unwrap().width(), 2 * 128 + 4);
+
+    let first = ok(&pixguide(&args), "eval");
+    // OIDN at 2 and 4 spp and two OIDN breakdown rows; noisy at 2 spp again, since the picture
+    // is redrawn with OIDN's panel and the cache holds no images (noisy at 4 spp is cached).
+    // One render per (scene, spp) and one per breakdown spp.
+    assert!(
+        first.contains("eval: 5 measured, 1 cached, 4 renders"),
         "{first}"
     );
     let md = std::fs::read_to_string(&out).unwrap();
@@ -294,7 +309,7 @@ fn eval_has_an_oidn_row_curve_and_panel() {
         "method table"
     );
     // The picture sheet has noisy, OIDN and the reference: three 128² tiles with 4 px gaps.
-    let sheet = image::open(base.join("out/results/cornell-box-2spp-images.png")).unwrap();
+    let sheet = image::open(&picture).unwrap();
     assert_eq!(sheet.width(), 3 * 128 + 2 * 4);
 
     let second = ok(&pixguide(&args), "eval again");

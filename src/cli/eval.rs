@@ -435,23 +435,27 @@ pub fn run(a: EvalArgs) -> Result<()> {
                     n == "noisy" || in_table || (picture && PICTURE_METHODS.contains(&n))
                 })
                 .collect();
-            let pictures_missing = picture && picture_paths(&dir, &s.name, spp).iter().any(|p| !p.exists());
+            let uncached = |i: usize| cache.get(&key("quality", &s.name, spp, &methods[i].name, &methods[i].id, a.seed, s.width, s.height)).is_none();
+            // Pictures are redrawn when a file is missing, or when a picture method is measured
+            // anew (new weights, or a method new to the page such as OIDN), whose panel would
+            // otherwise be stale or absent.
+            let redraw = picture
+                && (picture_paths(&dir, &s.name, spp).iter().any(|p| !p.exists())
+                    || wanted.iter().any(|&i| PICTURE_METHODS.contains(&methods[i].name.as_str()) && uncached(i)));
             let todo: Vec<usize> = wanted
                 .iter()
                 .copied()
                 .filter(|&i| {
-                    let m = &methods[i];
-                    // Pictures need the images, which the cache does not keep: their methods are
-                    // measured again when a picture file is missing.
-                    (pictures_missing && PICTURE_METHODS.contains(&m.name.as_str()))
-                        || cache.get(&key("quality", &s.name, spp, &m.name, &m.id, a.seed, s.width, s.height)).is_none()
+                    // Pictures need the images, which the cache does not keep: every picture
+                    // method is measured again for a redraw.
+                    (redraw && PICTURE_METHODS.contains(&methods[i].name.as_str())) || uncached(i)
                 })
                 .collect();
             cached += wanted.len() - todo.len();
             if !todo.is_empty() {
-                // Pictures are drawn only when they are missing, and then every picture method
-                // is in `todo`, so they are never drawn from a partial set.
-                jobs.push(Job { scene: si, spp, todo, picture: pictures_missing });
+                // Every picture method is in `todo` when pictures are drawn, so they are never
+                // drawn from a partial set.
+                jobs.push(Job { scene: si, spp, todo, picture: redraw });
             }
         }
     }
