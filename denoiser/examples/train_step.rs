@@ -1,7 +1,8 @@
 //! Times one joint training step (forward + backward + Adam) of a preset on random data.
 //!
-//! `cargo run --release -p denoiser --example train_step -- [preset] [batch] [size] [spp] [steps]`
-//! (defaults: default 4 64 8 3). Both branches, all losses of the joint stage.
+//! `cargo run --release -p denoiser --example train_step -- [preset] [batch] [size] [spp] [steps] [method]`
+//! (defaults: default 4 64 8 3 guided). Both branches, all losses of the method's first stage
+//! (L1 per branch, plus L_path where the method has PathNets).
 
 use std::time::Instant;
 
@@ -19,9 +20,10 @@ fn main() {
     let preset = args.first().map(String::as_str).unwrap_or("default");
     let num = |i: usize, d: usize| args.get(i).and_then(|s| s.parse().ok()).unwrap_or(d);
     let (b, size, spp, steps) = (num(1, 4), num(2, 64), num(3, 8), num(4, 3));
+    let method = args.get(5).map(|s| Method::parse(s).unwrap_or_else(|| panic!("unknown method {s}"))).unwrap_or(Method::Guided);
     let cfg = DenoiserConfig::preset(preset).unwrap_or_else(|| panic!("unknown preset {preset}"));
     let device = denoiser::cpu_training_device();
-    let mut model = MethodModel::init(&cfg, Method::Guided, &device);
+    let mut model = MethodModel::init(&cfg, method, &device);
     let o = size - 2 * cfg.margin();
     println!(
         "preset {preset}: {:.2} M MAC/pixel forward at {spp} spp; batch {b}×{size}² → {o}² outputs",
@@ -46,10 +48,12 @@ fn main() {
         let start = Instant::now();
         let out = model.forward(inputs.clone());
         let (d, s) = (out.diffuse, out.specular);
-        let loss = l1(d.output, t_diff.clone())
-            + l1(s.output, t_spec.clone())
-            + path_disentangling_loss(d.path.unwrap().samples, t_diff.clone(), &mut rng).mul_scalar(0.1)
-            + path_disentangling_loss(s.path.unwrap().samples, t_spec.clone(), &mut rng).mul_scalar(0.1);
+        let mut loss = l1(d.output, t_diff.clone()) + l1(s.output, t_spec.clone());
+        if let (Some(dp), Some(sp)) = (d.path, s.path) {
+            loss = loss
+                + path_disentangling_loss(dp.samples, t_diff.clone(), &mut rng).mul_scalar(0.1)
+                + path_disentangling_loss(sp.samples, t_spec.clone(), &mut rng).mul_scalar(0.1);
+        }
         let value: f32 = loss.clone().into_scalar();
         let grads = GradientsParams::from_grads(loss.backward(), &model);
         model = optim.step(1e-4, model, grads);
