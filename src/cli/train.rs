@@ -383,9 +383,12 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
                 ));
                 format!("{{\"event\":\"step\",\"stage\":{stage},\"step\":{step},\"loss\":{},\"seconds\":{seconds:.4}}}", json_f(*loss))
             }
-            Event::Validation { stage, step, total_step, rel_mse, best } => {
+            Event::Validation { stage, step, total_step, rel_mse, best, seconds } => {
                 last_val = Some(*rel_mse);
-                format!("{{\"event\":\"val\",\"stage\":{stage},\"step\":{step},\"total_step\":{total_step},\"rel_mse\":{},\"best\":{best}}}", json_f(*rel_mse))
+                format!(
+                    "{{\"event\":\"val\",\"stage\":{stage},\"step\":{step},\"total_step\":{total_step},\"rel_mse\":{},\"best\":{best},\"seconds\":{seconds:.2}}}",
+                    json_f(*rel_mse)
+                )
             }
             Event::Checkpoint { path } => format!("{{\"event\":\"checkpoint\",\"dir\":{:?}}}", path.display().to_string()),
             Event::StageEnd { index, steps, reason } => {

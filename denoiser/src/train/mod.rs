@@ -103,7 +103,9 @@ impl TrainOptions {
 pub enum Event<'a> {
     StageStart { index: usize, stage: &'a Stage, from_step: usize, steps_per_epoch: usize },
     Step { stage: usize, step: usize, steps: usize, loss: f64, seconds: f64, patches: usize },
-    Validation { stage: usize, step: usize, total_step: usize, rel_mse: f64, best: bool },
+    /// `seconds`: wall time of the run so far, summed over resumed sessions (validation
+    /// included), so curves can be drawn against time as well as steps.
+    Validation { stage: usize, step: usize, total_step: usize, rel_mse: f64, best: bool, seconds: f64 },
     Checkpoint { path: &'a Path },
     StageEnd { index: usize, steps: usize, reason: &'static str },
 }
@@ -428,7 +430,7 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
                     } else {
                         st.since_best += 1;
                     }
-                    events(Event::Validation { stage: k, step: st.step, total_step: st.total_steps, rel_mse: v, best });
+                    events(Event::Validation { stage: k, step: st.step, total_step: st.total_steps, rel_mse: v, best, seconds: elapsed(&started) });
                     if opts.patience.is_some_and(|p| st.since_best >= p) {
                         reason = "early stop";
                         break;
