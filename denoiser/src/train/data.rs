@@ -10,7 +10,7 @@ use renderer::film::{exr_io, Descriptors};
 use super::augment::{self, Dihedral};
 use super::patches::{self, PatchSampler, Sampling};
 use super::TrainError;
-use crate::preprocess::{prepare, prepare_target, InputTensors, PreparedImage, PreparedTarget, TargetTensors};
+use crate::preprocess::{prepare, prepare_for_inference, prepare_target, InputTensors, PreparedImage, PreparedTarget, TargetTensors};
 
 /// One shot: its inputs at every sample count, its target and its patch sampler.
 pub struct Shot {
@@ -87,7 +87,7 @@ pub fn load_shot(root: &Path, dir: &str, spps: &[usize], opts: &LoadOptions) -> 
     let desc_path = d.join(format!("descriptors_{max}spp.safetensors"));
     // The descriptors feed the P-buffer models, the G+P path-weight channel and the importance
     // map's bounce-type term, so they are read whenever present.
-    let desc = if desc_path.exists() {
+    let mut desc = if desc_path.exists() {
         Some(Descriptors::read_safetensors(&desc_path).map_err(|e| err(&desc_path, e))?)
     } else if opts.descriptors {
         return Err(err(&desc_path, "missing; P-buffer models need the per-sample descriptors"));
@@ -102,12 +102,20 @@ pub fn load_shot(root: &Path, dir: &str, spps: &[usize], opts: &LoadOptions) -> 
         if frame.width as usize != target.width || frame.height as usize != target.height {
             return Err(err(&p, format!("{}×{} but the reference is {}×{}", frame.width, frame.height, target.width, target.height)));
         }
-        frame.descriptors = desc.clone();
-        let mut img = prepare(&frame).map_err(|e| err(&p, e))?;
-        if s == max && opts.descriptors {
+        // The descriptors are lent to each spp's frame (for the path weight and the
+        // pass-through mask) and taken back; only the largest spp of a P-buffer run normalises
+        // them into planes.
+        frame.descriptors = desc.take();
+        let img = if s == max && opts.descriptors {
+            let mut img = prepare(&frame).map_err(|e| err(&p, e))?;
             descriptors = img.descriptors.take();
-        }
-        img.descriptors = None;
+            desc = frame.descriptors.take();
+            img
+        } else {
+            let mut img = prepare_for_inference(&mut frame).map_err(|e| err(&p, e))?;
+            desc = img.records.take();
+            img
+        };
         images.push(img);
     }
     let (w, h) = (target.width, target.height);
