@@ -37,6 +37,17 @@ enum Command {
     /// Regenerate docs/results.md: every method on the test scenes at each spp — error tables,
     /// error-vs-spp and error-vs-time plots, runtime breakdown, pictures (resumable).
     Eval(cli::eval::EvalArgs),
+    /// Plot validation relMSE of training runs (their `<weights>.log.jsonl`) against steps and
+    /// wall time, and print a Markdown summary: best validation and where each curve flattens.
+    ///
+    /// The PNG has two panels, validation relMSE against total steps and against wall-time
+    /// minutes, one curve per log, a ring at each run's best validation. The table on stdout
+    /// gives per run its steps, wall minutes, best validation relMSE and its step and minute,
+    /// and where the curve flattens: the first validation that no later validation improves on
+    /// by more than 5 % (relative); "not yet" when only the last one qualifies. Logs whose
+    /// validations carry no wall time (written before they did) take it from their summed step
+    /// durations, which leave out validation; the legend and table say so.
+    PlotTraining(cli::plot_training::PlotTrainingArgs),
 }
 
 fn main() {
@@ -55,6 +66,7 @@ fn main() {
         Command::Train(a) => cli::train::run(a),
         Command::Denoise(a) => cli::denoise::run(a),
         Command::Eval(a) => cli::eval::run(a),
+        Command::PlotTraining(a) => cli::plot_training::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -17,6 +17,13 @@ pub struct Canvas<'a> {
     h: u32,
 }
 
+impl<'a> Canvas<'a> {
+    /// `px` holds `w × h` RGB8 pixels.
+    pub fn new(px: &'a mut [u8], w: u32, h: u32) -> Self {
+        Canvas { px, w, h }
+    }
+}
+
 /// Bitmap-font scale for a requested text size in pixels (the glyphs are 5 pixels tall).
 fn scale_for(size: f64) -> i32 {
     ((size / 7.0).round() as i32).max(1)
@@ -142,6 +149,11 @@ fn log_range(v: impl Iterator<Item = f64>) -> (f64, f64) {
 /// Tick values inside [lo, hi]: the 1-2-5 sequence of each decade, or a finer one if that
 /// leaves fewer than three (plotters' own log ticks skip narrow ranges entirely).
 fn ticks(lo: f64, hi: f64) -> Vec<f64> {
+    ticks_at_least(lo, hi, 3)
+}
+
+/// As `ticks`, taking a finer sequence while the coarser one leaves fewer than `n`.
+pub(super) fn ticks_at_least(lo: f64, hi: f64, n: usize) -> Vec<f64> {
     for steps in [&[1.0, 2.0, 5.0][..], &[1.0, 1.5, 2.0, 3.0, 5.0, 7.0][..], &[1.0, 1.2, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0][..]] {
         let mut out = Vec::new();
         let mut e = lo.log10().floor() as i32;
@@ -154,7 +166,7 @@ fn ticks(lo: f64, hi: f64) -> Vec<f64> {
             }
             e += 1;
         }
-        if out.len() >= 3 || steps.len() > 6 {
+        if out.len() >= n || steps.len() > 6 {
             return out;
         }
     }
@@ -241,15 +253,36 @@ fn legend_layout(entries: &[(usize, &str)], width: u32) -> Vec<(u32, u32)> {
     out
 }
 
+/// Height in pixels of the legend of `entries` in `width` pixels (0 without entries).
+pub(super) fn legend_height(entries: &[(usize, &str)], width: u32) -> u32 {
+    let rows = legend_layout(entries, width).iter().map(|p| p.1 + 1).max().unwrap_or(0);
+    rows * LEGEND_ROW + if rows > 0 { 8 } else { 0 }
+}
+
+/// Draws the legend of `entries` (a colour swatch and a label each) from row `top` of an RGB8
+/// buffer `width` pixels wide; it takes `legend_height` rows.
+pub(super) fn draw_legend(px: &mut [u8], width: u32, top: u32, entries: &[(usize, &str)]) {
+    let h = px.len() as u32 / 3 / width.max(1);
+    for (&(c, label), (x, row)) in entries.iter().zip(legend_layout(entries, width)) {
+        let y = top + row * LEGEND_ROW + 4;
+        let RGBColor(r, g, b) = colour(c);
+        for yy in (y + 4..y + 7).filter(|&yy| yy < h) {
+            for xx in (x..x + 16).filter(|&xx| xx < width) {
+                let o = ((yy * width + xx) * 3) as usize;
+                px[o..o + 3].copy_from_slice(&[r, g, b]);
+            }
+        }
+        text(px, width, x + 22, y, LEGEND_SCALE, [40, 40, 40], label);
+    }
+}
+
 /// Two log-log panels side by side (left: relMSE, right: 1 − SSIM) written as a PNG.
 /// `x_keys`: the x ticks (e.g. the spp values), or None for a 1-2-5 sequence.
 pub fn write_pair(path: &Path, x_label: &str, x_keys: Option<Vec<f64>>, left: (&str, &[Curve]), right: (&str, &[Curve])) -> Result<()> {
     let (w, plot_h) = (1100u32, 440u32);
     // One legend for both panels, below them, so it never covers a curve.
     let entries = legend_entries(&[left.1, right.1]);
-    let layout = legend_layout(&entries, w);
-    let rows = layout.iter().map(|p| p.1 + 1).max().unwrap_or(0);
-    let h = plot_h + rows * LEGEND_ROW + if rows > 0 { 8 } else { 0 };
+    let h = plot_h + legend_height(&entries, w);
     let mut px = vec![255u8; (w * h * 3) as usize];
     {
         let root = DrawingArea::from(Canvas { px: &mut px, w, h });
@@ -258,17 +291,7 @@ pub fn write_pair(path: &Path, x_label: &str, x_keys: Option<Vec<f64>>, left: (&
         panel(&halves[0], left.0, x_label, left.0, left.1, x_keys.clone())?;
         panel(&halves[1], right.0, x_label, right.0, right.1, x_keys)?;
     }
-    for (&(c, label), &(x, row)) in entries.iter().zip(&layout) {
-        let y = plot_h + row * LEGEND_ROW + 4;
-        let RGBColor(r, g, b) = colour(c);
-        for yy in y + 4..y + 7 {
-            for xx in x..x + 16 {
-                let o = ((yy * w + xx) * 3) as usize;
-                px[o..o + 3].copy_from_slice(&[r, g, b]);
-            }
-        }
-        text(&mut px, w, x + 22, y, LEGEND_SCALE, [40, 40, 40], label);
-    }
+    draw_legend(&mut px, w, plot_h, &entries);
     super::denoise::ensure_parent(path)?;
     renderer::film::png::write_rgb8(path, w, h, px)?;
     Ok(())

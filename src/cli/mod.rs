@@ -9,5 +9,6 @@ pub mod train;
 pub mod denoise;
 pub mod eval;
 pub mod eval_plot;
+pub mod plot_training;
 pub mod eval_report;
 pub mod oidn_setup;
