@@ -21,7 +21,7 @@ fn main() {
     let num = |i: usize, d: usize| args.get(i).and_then(|s| s.parse().ok()).unwrap_or(d);
     let (size, s, chunk) = (num(0, 272), num(1, 8), num(2, 1 << 17));
     let d = denoiser::cpu_device();
-    let net = DenoiserConfig::cpu_default().pathnet.init(1, &d);
+    let net = DenoiserConfig::kpcn_cpu().pathnet.init(1, &d);
     let u = Distribution::Uniform(0.0, 1.0);
     let x: Tensor<5> = Tensor::random([1, s, 36, size, size], u, &d);
     let sync = |t: Tensor<4>| t.into_data();
@@ -71,7 +71,7 @@ fn denoise_breakdown(size: usize, s: usize) {
     use denoiser::method::{Method, MethodModel};
     use denoiser::preprocess::PreparedImage;
     let d = denoiser::cpu_device();
-    let cfg = DenoiserConfig::cpu_default();
+    let cfg = DenoiserConfig::kpcn_cpu();
     let model = MethodModel::init(&cfg, Method::Guided, &d);
     let n = size * size;
     let mut k = 0u64;

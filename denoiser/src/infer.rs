@@ -714,14 +714,14 @@ mod tests {
     /// the tiled pass's context is the KPCN margin plus E's radius, without the U-Net's.
     #[test]
     fn windows_carry_the_receptive_radius() {
-        let c = DenoiserConfig::cpu_default();
+        let c = DenoiserConfig::kpcn_cpu();
         assert_eq!(context(&c, Method::G), 7);
         assert_eq!(context(&c, Method::Guided), 7 + 5);
         assert_eq!(pathnet_radius(&c), 29);
         assert_eq!(window_side(&c, Method::Guided, 256), 280);
         assert_eq!(unet_window_side(&c, Method::Guided, 256), 320);
         assert_eq!(auto_tile(&c), 256);
-        let ms = DenoiserConfig::mskp();
+        let ms = DenoiserConfig::cpu_default();
         let r = ms.column_radius();
         assert_eq!(context(&ms, Method::G), r);
         assert_eq!(window_side(&ms, Method::G, 1024) % 16, 0);

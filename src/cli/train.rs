@@ -35,8 +35,8 @@ pub struct TrainArgs {
     /// Trained P model the guided model starts from.
     #[arg(long)]
     pub from_p: Option<PathBuf>,
-    /// Network sizes: default (CPU KPCN), half (50 % of default's channels), mskp (multi-scale
-    /// kernel-predicting U-Net columns), paper-half (50 % of the paper's) or paper.
+    /// Network sizes: default (multi-scale kernel-predicting U-Net columns), half (50 % of
+    /// default's channels), kpcn (the CPU-sized KPCN), paper-half (50 % of the paper's) or paper.
     #[arg(long, default_value = "default")]
     pub preset: String,
     #[arg(long, default_value_t = 1)]
@@ -84,6 +84,9 @@ pub struct TrainArgs {
     /// Steps of full-n-full (guided from scratch).
     #[arg(long)]
     pub scratch_steps: Option<usize>,
+    /// Peak rate of the per-branch stage [default: the backbone's measured peak: 1e-3 for
+    /// the U-Net presets, the paper's 1e-4 for KPCN ones]. Joint and from-scratch rates follow
+    /// the backbone too (docs/training.md, "Learning rate").
     #[arg(long)]
     pub lr_branches: Option<f64>,
     #[arg(long)]
@@ -127,8 +130,8 @@ pub struct TrainArgs {
     pub quiet: bool,
 }
 
-fn schedule_options(a: &TrainArgs) -> ScheduleOptions {
-    let mut o = ScheduleOptions::default();
+fn schedule_options(a: &TrainArgs, config: &DenoiserConfig) -> ScheduleOptions {
+    let mut o = ScheduleOptions::for_config(config);
     let set = |dst: &mut usize, v: Option<usize>| {
         if let Some(v) = v {
             *dst = v
@@ -287,7 +290,7 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
         bail!("--warmup {}: expected a fraction in [0, 1)", a.warmup);
     }
     let sampling = Sampling::parse(&a.sampling).with_context(|| format!("--sampling {}: expected importance or uniform", a.sampling))?;
-    let stages = schedule::plan(method, ablation, &schedule_options(&a));
+    let stages = schedule::plan(method, ablation, &schedule_options(&a, &config));
     let name = match ablation {
         Some(ab) => ab.name().to_string(),
         None => method.name().to_string(),

@@ -1,6 +1,7 @@
 //! The training schedule of method.md §3 and §6.2, and the ablations of Seed Table 2.
 
 use crate::method::Method;
+use crate::model::DenoiserConfig;
 
 /// What a stage optimises.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -132,6 +133,21 @@ impl Default for ScheduleOptions {
             w_path: 0.1,
             lr_shape: LrShape::WarmupCosine { warmup: 0.05 },
         }
+    }
+}
+
+impl ScheduleOptions {
+    /// The defaults with the rates of `config`'s backbone: the paper's for a KPCN; for the
+    /// multi-scale U-Net its measured peak ([`DenoiserConfig::peak_lr`]) for pretraining and
+    /// from-scratch runs, and for the joint stage E at half of it (E starts fresh) and the
+    /// pretrained columns and PathNets at a twentieth (they only adapt to the blend).
+    pub fn for_config(config: &DenoiserConfig) -> Self {
+        let d = Self::default();
+        if config.mskp.is_none() {
+            return d;
+        }
+        let peak = config.peak_lr();
+        ScheduleOptions { lr_branches: peak, lr_scratch: peak, lr_joint_e: peak / 2.0, lr_joint_rest: peak / 20.0, ..d }
     }
 }
 
