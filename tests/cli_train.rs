@@ -64,8 +64,8 @@ fn train_g_p_guided_and_resume() {
     let o = Command::new(env!("CARGO_BIN_EXE_pixguide")).args(["train", "--data", d, "--method", "guided", "--patch", "24", "-o", &out("x.safetensors"), "--quiet"]).output().unwrap();
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--from-g"));
     // --all trains the whole comparison, reading each kind of dataset once for all ten runs;
-    // at --all-scale 0.001 its g run has the steps of the g run above (2 + 1), and the shared
-    // dataset gives it the same weights as that run's own read.
+    // at --all-scale 0.001 its g run has 3 branch steps and no finetune (the plan's 2600 + 0),
+    // and the shared dataset gives it the same weights as a standalone run's own read.
     let all_dir = out("all");
     let mut a = vec!["train", "--all", "--all-scale", "0.001", "--out-dir", &all_dir];
     a.extend_from_slice(&common[..6]);
@@ -85,7 +85,12 @@ fn train_g_p_guided_and_resume() {
         let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + n]).unwrap();
         assert_eq!(header["__metadata__"]["pixguide.preset"], "half", "{name}-half");
     }
-    assert_eq!(tensors(&base.join("all/g-default.safetensors")), tensors(&base.join("g.safetensors")));
+    let mut g3 = vec!["train", "--method", "g", "--branch-steps", "3", "--finetune-steps", "0", "--val-every", "1", "--quiet", "-o"];
+    let g3_out = out("g3.safetensors");
+    g3.push(&g3_out);
+    g3.extend_from_slice(&common[..6]);
+    pixguide(&g3);
+    assert_eq!(tensors(&base.join("all/g-default.safetensors")), tensors(&base.join("g3.safetensors")));
     // Stop after 2 steps, resume: same tensors as the straight G run above.
     let stopped = train(&["--method", "g", "-o", &out("g2.safetensors"), "--stop-after", "2"]);
     assert!(stopped.starts_with("stopped after 2 steps"), "{stopped}");

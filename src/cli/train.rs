@@ -171,19 +171,22 @@ const fn item(name: &'static str, method: &'static str, ablation: Option<&'stati
     PlanItem { name, method, ablation, preset, steps, secs_per_step }
 }
 
-/// Proposed for ≤ 2.5 h on this 2-core machine (docs/training.md).
+/// The runs of 2026-11-25 (docs/training.md, the backbone race and docs/denoiser.md): step
+/// counts that fill ≈ 20 min per pretraining run and ≈ 15 min per joint run at the seconds per
+/// step measured there (one thread each, two runs side by side), no finetune stage (it does not
+/// move a model at 1e-6 in runs this short). ≈ 2 h for the whole plan.
 const PLAN: [PlanItem; 10] = [
-    item("g", "g", None, "default", [1500, 200, 0], 0.52),
-    item("p", "p", None, "default", [800, 100, 0], 1.6),
-    item("both", "both", None, "default", [800, 100, 0], 1.6),
-    item("guided", "guided", None, "default", [0, 0, 400], 2.43),
-    item("fix-n-train", "guided", Some("fix-n-train"), "default", [0, 0, 500], 0.56),
-    item("radiance-only", "guided", Some("radiance-only"), "default", [0, 0, 400], 2.15),
-    item("full-n-full", "guided", Some("full-n-full"), "default", [0, 0, 400], 2.43),
+    item("g", "g", None, "default", [2600, 0, 0], 0.47),
+    item("p", "p", None, "default", [500, 0, 0], 2.43),
+    item("both", "both", None, "default", [250, 0, 0], 3.5),
+    item("guided", "guided", None, "default", [0, 0, 170], 5.0),
+    item("fix-n-train", "guided", Some("fix-n-train"), "default", [0, 0, 170], 1.5),
+    item("radiance-only", "guided", Some("radiance-only"), "default", [0, 0, 170], 5.0),
+    item("full-n-full", "guided", Some("full-n-full"), "default", [0, 0, 400], 5.0),
     // The half models get their default twins' step counts, so the sizes differ only in width.
-    item("g", "g", None, "half", [1500, 200, 0], 0.39),
-    item("p", "p", None, "half", [800, 100, 0], 1.35),
-    item("guided", "guided", None, "half", [0, 0, 400], 1.84),
+    item("g", "g", None, "half", [2600, 0, 0], 0.35),
+    item("p", "p", None, "half", [500, 0, 0], 2.0),
+    item("guided", "guided", None, "half", [0, 0, 170], 4.0),
 ];
 
 fn run_all(a: TrainArgs) -> Result<()> {
