@@ -62,7 +62,7 @@ fn eval_tiny_configuration_writes_the_page_and_resumes() {
     assert_eq!(noisy.len(), 4, "{noisy:?}");
     // Noisy at 2 spp is what everything is normalised by.
     assert_eq!(&noisy[..2], ["1.000", "1.000"]);
-    let g = row(&md, table, "KPCN-G");
+    let g = row(&md, table, "D_G (g)");
     let guided = row(&md, table, "guided");
     // The shipped weights beat the 2-spp noise on this scene by about 3× in relMSE and 5× in
     // 1−SSIM (docs/denoiser.md; seeded render, so no sampling noise in the test): "below noisy"
@@ -83,7 +83,7 @@ fn eval_tiny_configuration_writes_the_page_and_resumes() {
     assert_eq!(bd.len(), 9, "{bd:?}");
     assert_eq!((bd[0], bd[7]), ("guided", "–"), "{bd:?}");
     assert!(bd[1..7].iter().chain([&bd[8]]).all(|c| c.parse::<f64>().is_ok_and(|v| v >= 0.0)), "{bd:?}");
-    assert!(!md.contains("KPCN-P") && md.contains("cores (`nproc`)") && md.contains("--methods noisy,g,guided"));
+    assert!(!md.contains("D_P (p)") && md.contains("cores (`nproc`)") && md.contains("--methods noisy,g,guided"));
 
     // PNGs: plots and the three picture sheets, decodable and of the documented sizes.
     let dir = base.join("out/results");
@@ -137,7 +137,7 @@ fn eval_reports_missing_weights_and_rejects_bad_input() {
     // noisy and g at 2 spp; one render (no method needs descriptors).
     assert!(s.starts_with("eval: 2 measured, 0 cached, 1 renders"), "{s}");
     let md = std::fs::read_to_string(&out).unwrap();
-    let both = row(&md, "(the paper's Table 2 layout)", "KPCN-both");
+    let both = row(&md, "(the paper's Table 2 layout)", "both-buffers");
     assert!(both[0].starts_with("not available (no ") && both[0].contains("both-default.safetensors"), "{both:?}");
 
     // A scene without a reference: the error names the missing file.

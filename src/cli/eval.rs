@@ -73,9 +73,9 @@ pub struct EvalArgs {
 
 /// Methods `eval` knows: name, weight file stem, label in tables and plots.
 pub const KNOWN: [(&str, &str, &str); 8] = [
-    ("g", "g-default", "KPCN-G"),
-    ("p", "p-default", "KPCN-P"),
-    ("both", "both-default", "KPCN-both"),
+    ("g", "g-default", "D_G (g)"),
+    ("p", "p-default", "D_P (p)"),
+    ("both", "both-default", "both-buffers"),
     ("guided", "guided-default", "guided"),
     ("guided-half", "guided-half", "guided (half)"),
     ("fix-n-train", "fix-n-train-default", "Fix-N-Train"),

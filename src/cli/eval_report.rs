@@ -132,7 +132,7 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
     )?;
     writeln!(
         w,
-        "Each (scene, spp) is rendered twice with the same seed: without per-sample path descriptors (the input of noisy, KPCN-G and OIDN) and with them \
+        "Each (scene, spp) is rendered twice with the same seed: without per-sample path descriptors (the input of noisy, D_G and OIDN) and with them \
          (every model with a path-manifold module); the command checks that both give the same radiance. **Time of a method** = wall seconds of \
          its render + preprocessing + tiled inference, measured; noisy = its render alone; OIDN = its render + OIDN's filter (commit + execute, \
          after one untimed warm-up run per eval run), without loading the library and creating OIDN's device, done once per run.\n"
