@@ -743,7 +743,10 @@ mod tests {
     #[test]
     fn staged_equals_model_forward() {
         let mskp = tiny().with_mskp(Some(MsKpConfig::new(34).with_widths(vec![6, 8]).with_kernel_scales(2).with_filter_size(3).with_margin(2)));
-        for (cfg, (w, h), tiles) in [(tiny(), (37, 29), [8, 13]), (mskp, (80, 72), [16, 24])] {
+        // The shipped compositor, at three kernel scales so that two of them swap a low band.
+        let swap = MsKpConfig::new(34).with_widths(vec![4, 4, 4]).with_convs_per_block(1).with_kernel_scales(3).with_filter_size(3).with_margin(2);
+        let swap = tiny().with_mskp(Some(swap.with_compositor(crate::mskp::ScaleCompositor::LowPassSwap)));
+        for (cfg, (w, h), tiles) in [(tiny(), (37, 29), [8, 13]), (mskp, (80, 72), [16, 24]), (swap, (120, 104), [16, 24])] {
             staged_equals_model_forward_for(&cfg, w, h, tiles);
         }
     }

@@ -10,6 +10,22 @@ pub fn l1<const D: usize>(x: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
     (x - y).abs().mean()
 }
 
+/// The evaluation's tone map (a) of method.md §7.3, on `[B, 3, H, W]` radiance, with a 1e-3
+/// offset under the 1/2.2 power so that its gradient stays finite at black:
+/// τ(c) = (max(c, 0)/(1 + lum(c)/1.5) + 1e-3)^(1/2.2).
+pub fn tonemap_eval(c: Tensor<4>) -> Tensor<4> {
+    let c = c.clamp_min(0.0);
+    let lum = c.clone().narrow(1, 0, 1).mul_scalar(0.2126) + c.clone().narrow(1, 1, 1).mul_scalar(0.7152) + c.clone().narrow(1, 2, 1).mul_scalar(0.0722);
+    (c / lum.div_scalar(1.5).add_scalar(1.0)).add_scalar(1e-3).powf_scalar(1.0 / 2.2)
+}
+
+/// L1 after [`tonemap_eval`]: the distance the test relMSE sees, so a dark pixel's relative
+/// error counts as much as a bright one's (plain L1 on radiance lets a shadow next to a lit
+/// face take its neighbour's light at almost no cost).
+pub fn l1_tonemapped(x: Tensor<4>, y: Tensor<4>) -> Tensor<1> {
+    l1(tonemap_eval(x), tonemap_eval(y))
+}
+
 /// Validation relMSE on linear HDR radiance: ½·mean[(x−y)² / (y² + 0.01)].
 pub fn rel_mse_val<const D: usize>(x: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
     let den = y.clone().square().add_scalar(0.01);
@@ -66,6 +82,25 @@ mod tests {
 
     fn scalar(t: Tensor<1>) -> f64 {
         to_vec(t)[0]
+    }
+
+    /// The tone-mapped L1 is the metric's distance: the same absolute error costs more on a
+    /// shadow than on a lit face (here ≈ 5×: a 0.02 → 0.04 error against 1.0 → 1.02), and its
+    /// gradient stays finite at black.
+    #[test]
+    fn tonemapped_l1_weighs_dark_errors_and_has_finite_gradients() {
+        let d = crate::cpu_training_device();
+        let img = |v: f64| tensor(&[v; 3], [1, 3, 1, 1], &d);
+        let dark = scalar(l1_tonemapped(img(0.04), img(0.02)));
+        let bright = scalar(l1_tonemapped(img(1.02), img(1.0)));
+        assert!(dark > 4.0 * bright, "dark {dark} vs bright {bright}");
+        // Hand value of τ at c = 1 (grey): 1/(1 + 1/1.5) = 0.6, (0.6 + 1e-3)^(1/2.2).
+        let t = to_vec(tonemap_eval(img(1.0)))[0];
+        assert!((t - 0.601f64.powf(1.0 / 2.2)).abs() < 1e-5, "{t}");
+        let x = img(0.0).require_grad();
+        let g = l1_tonemapped(x.clone(), img(0.5)).backward();
+        let grad = crate::test_util::grad_of(&x, &g);
+        assert!(grad.iter().all(|v| v.is_finite() && *v != 0.0), "{grad:?}");
     }
 
     #[test]

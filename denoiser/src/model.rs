@@ -8,7 +8,7 @@ use burn::tensor::{Device, Tensor};
 use crate::column::Column;
 use crate::ensemble::EnsembleConfig;
 use crate::kpcn::{KpcnConfig, Variant};
-use crate::mskp::MsKpConfig;
+use crate::mskp::{MsKpConfig, ScaleCompositor};
 use crate::pathnet::PathNetConfig;
 
 /// Sizes of every network of one branch (both branches use the same sizes).
@@ -87,7 +87,7 @@ impl DenoiserConfig {
                 .with_out_hidden(24),
             EnsembleConfig::new().with_depth(5).with_width(16).with_conv_kernel(3),
         )
-        .with_mskp(Some(MsKpConfig::new(Variant::G.in_channels())))
+        .with_mskp(Some(MsKpConfig::new(Variant::G.in_channels()).with_compositor(ScaleCompositor::LowPassSwap)))
     }
 
     /// Preset names, for help texts and errors.

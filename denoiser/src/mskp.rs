@@ -6,17 +6,22 @@
 //! max-pooling, bilinear upsampling, skip concatenation) sees ≥ 64 px of context for a fraction of
 //! the multiply-accumulates, and its decoder predicts at each of the finest `kernel_scales` levels
 //! a small k×k softmax kernel that filters the colour pyramid at that level (2×2 box
-//! downsampling). The filtered levels are composited coarse to fine by a per-pixel blend weight
-//! α = sigmoid(·) predicted at the finer level:
+//! downsampling). The filtered levels are composited coarse to fine by Vogels et al. 2018's scale
+//! compositor, with a per-pixel weight α = sigmoid(·) predicted at the finer level:
 //!
-//!   out_{S−1} = f_{S−1};  out_s = (1 − α_s)·f_s + α_s·up(out_{s+1}).
+//!   out_{S−1} = f_{S−1};  out_s = f_s + α_s·(up(out_{s+1}) − up(down(f_s))).
 //!
-//! Every level's output is a convex combination of input colours (softmax kernels, box
-//! averages, bilinear weights, α ∈ (0,1)), so the column can neither create energy nor overshoot,
-//! and the identity (α = 0, a one-hot centre kernel at full resolution) is in reach: a converged
-//! input can be returned unchanged. This is multi-scale kernel prediction in the sense of Vogels
-//! et al. 2018 and Hasselgren et al. 2020; the composite is a plain convex blend, not their scale
-//! compositor (which also subtracts the fine level's own low-pass band).
+//! α replaces only the low-pass band of the fine level by the coarse result; the fine level's
+//! high frequencies (the edges its kernel kept) survive. The plain convex blend
+//! (1 − α)·f_s + α·up(out_{s+1}) that this replaced blurred every edge wherever α > 0 (measured
+//! 2026-11-25: the error of converged Cornell-box frames sat in lines along every silhouette and
+//! around the light; docs/denoiser.md). The output is no longer a convex combination of input
+//! colours, so it can undershoot slightly at an edge (inference clamps radiance at 0), but a
+//! constant image is still returned unchanged, and the identity (α = 0, a one-hot centre kernel
+//! at full resolution) is in reach: a converged input can be given back. The default predicts
+//! kernels at all 5 U-Net levels (5×5 taps at 1/16 resolution reach ≈ 48 px of box-averaged
+//! colour), for frames whose samples are too sparse for a 20 px reach, such as veach-ajar at
+//! 2 spp (docs/denoiser.md).
 //!
 //! Borders: each level is reflect-padded before filtering, so the kernels never read zeros and the
 //! image edge is not darkened (the KPCN's ⚠ of docs/method.md §3). The network output is cropped
@@ -44,7 +49,7 @@ pub struct MsKpConfig {
     #[config(default = 2)]
     pub convs_per_block: usize,
     /// Levels (from full resolution) at which a kernel is predicted and applied.
-    #[config(default = 3)]
+    #[config(default = 5)]
     pub kernel_scales: usize,
     /// Predicted filter size k (odd) at every scale.
     #[config(default = 5)]
@@ -52,6 +57,19 @@ pub struct MsKpConfig {
     /// Pixels cropped per side from the output (the context training and inference give it).
     #[config(default = 8)]
     pub margin: usize,
+    /// How the filtered levels are composited. Weight files written before this field existed
+    /// have the convex blend, so that is what a missing field means; `default` uses the swap.
+    #[config(default = "ScaleCompositor::ConvexBlend")]
+    pub compositor: ScaleCompositor,
+}
+
+/// The coarse-to-fine composite of [`MsKpNet::composite`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum ScaleCompositor {
+    /// out_s = (1 − α)·f_s + α·up(out_{s+1}): blurs edges wherever α > 0 (2026-11-24 models).
+    ConvexBlend,
+    /// Vogels et al. 2018: out_s = f_s + α·(up(out_{s+1}) − up(down(f_s))).
+    LowPassSwap,
 }
 
 const CONV: usize = 3;
@@ -151,6 +169,7 @@ impl MsKpConfig {
                 })
                 .collect(),
             margin: self.margin,
+            low_pass_swap: self.compositor == ScaleCompositor::LowPassSwap,
         }
     }
 }
@@ -163,6 +182,8 @@ pub struct MsKpNet {
     /// One 1×1 head per kernel scale, on the decoder's features at that level.
     pub heads: Vec<Conv>,
     pub margin: usize,
+    /// [`ScaleCompositor::LowPassSwap`] (else the convex blend); set from the config.
+    pub low_pass_swap: bool,
 }
 
 /// 2×2 box average (floors odd sizes, like the U-Net's pooling).
@@ -238,7 +259,7 @@ impl MsKpNet {
     }
 
     /// Filters and composites the colour `[B, 3, H, W]` with the head outputs; full size.
-    pub fn composite(colour: Tensor<4>, heads: Vec<(Tensor<4>, Option<Tensor<4>>)>) -> Tensor<4> {
+    pub fn composite(colour: Tensor<4>, heads: Vec<(Tensor<4>, Option<Tensor<4>>)>, low_pass_swap: bool) -> Tensor<4> {
         let mut pyramid = vec![colour];
         for _ in 1..heads.len() {
             let next = box_down(pyramid.last().unwrap().clone());
@@ -250,8 +271,11 @@ impl MsKpNet {
             out = Some(match (out, alpha) {
                 (Some(coarse), Some(a)) => {
                     let [_, _, h, w] = f.dims();
+                    // Vogels et al.'s scale compositor: α swaps only the fine level's own
+                    // low-pass band for the coarse result, so the edges its kernel kept stay.
                     let a = sigmoid(a);
-                    f.clone() + (upsample_to(coarse, h, w) - f) * a
+                    let low = if low_pass_swap { upsample_to(box_down(f.clone()), h, w) } else { f.clone() };
+                    f + (upsample_to(coarse, h, w) - low) * a
                 }
                 (None, _) => f,
                 (Some(_), None) => unreachable!("only the coarsest scale lacks a blend weight"),
@@ -264,7 +288,7 @@ impl MsKpNet {
     pub fn forward(&self, input: Tensor<4>) -> Tensor<4> {
         let [_, _, h, w] = input.dims();
         let heads = self.heads(input.clone());
-        let out = Self::composite(input.narrow(1, 0, 3), heads);
+        let out = Self::composite(input.narrow(1, 0, 3), heads, self.low_pass_swap);
         center_crop(out, h - 2 * self.margin, w - 2 * self.margin)
     }
 }
@@ -277,7 +301,7 @@ mod tests {
     use crate::{cpu_device, cpu_training_device};
 
     fn tiny(in_channels: usize) -> MsKpConfig {
-        MsKpConfig::new(in_channels).with_widths(vec![4, 6, 6]).with_kernel_scales(3).with_filter_size(3).with_margin(1)
+        MsKpConfig::new(in_channels).with_widths(vec![4, 6, 6]).with_kernel_scales(3).with_filter_size(3).with_margin(1).with_compositor(ScaleCompositor::LowPassSwap)
     }
 
     /// The hand count of a two-level, one-scale column.
@@ -414,6 +438,43 @@ mod tests {
 
     /// Odd sizes (pooling floors, upsampling returns to the skip's size) and images smaller than
     /// a coarse level's mirror padding run and give the documented shape.
+    /// Vogels et al.'s compositor swaps only a level's own low-pass band: with identity kernels
+    /// at every scale the output is the input even at α = 1, edges included. (The convex blend
+    /// it replaced gave up(down(x)) there, a blurred copy.)
+    #[test]
+    fn identity_kernels_keep_the_input_at_any_blend_weight() {
+        let d = cpu_device();
+        let cfg = tiny(4);
+        let mut rng = SplitMix64::new(6);
+        let dims = [1, 4, 16, 16];
+        // A step edge plus noise: what a converged frame's silhouette looks like.
+        let x: Vec<f64> = (0..dims.iter().product()).map(|i| if i % 16 < 7 { 0.02 } else { 1.0 } + 0.01 * rng.next_f64()).collect();
+        let mut net = cfg.init(1, &d);
+        let taps = 9;
+        for s in 0..cfg.kernel_scales {
+            let n = cfg.head_channels(s);
+            let c = net.heads[s].weight.dims()[1];
+            let mut bias = vec![-60.0f32; n];
+            bias[taps / 2] = 60.0;
+            if n > taps {
+                bias[taps] = 60.0; // α = 1
+            }
+            net.heads[s].weight = burn::module::Param::from_tensor(Tensor::zeros([n, c, 1, 1], &d));
+            net.heads[s].bias = burn::module::Param::from_tensor(Tensor::from_data(burn::tensor::TensorData::new(bias, [n]), &d));
+        }
+        let out = to_vec(net.forward(tensor(&x, dims, &d)));
+        let (m, o) = (cfg.margin, 16 - 2 * cfg.margin);
+        let mut worst = 0.0f64;
+        for c in 0..3 {
+            for y in 0..o {
+                for xx in 0..o {
+                    worst = worst.max((out[(c * o + y) * o + xx] - x[(c * 16 + y + m) * 16 + xx + m]).abs());
+                }
+            }
+        }
+        assert!(worst < 1e-5, "identity kernels with α = 1 changed the input by {worst}");
+    }
+
     #[test]
     fn any_size_runs() {
         let d = cpu_device();

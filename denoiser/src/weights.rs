@@ -15,6 +15,7 @@ use burn::store::{ApplyError, FloatCastAdapter, ModuleSnapshot, SafetensorsStore
 use burn::tensor::{DType, Device};
 use serde::{Deserialize, Serialize};
 
+use crate::mskp::ScaleCompositor;
 use crate::method::{Method, MethodModel};
 use crate::model::DenoiserConfig;
 
@@ -149,8 +150,12 @@ fn header(path: &Path, bytes: &[u8]) -> Result<(DenoiserConfig, Method, String, 
     if version != FORMAT_VERSION {
         return Err(bad(keys::FORMAT, format!("version {version}, this program reads {FORMAT_VERSION}")));
     }
-    let config: DenoiserConfig =
-        serde_json::from_str(field(keys::CONFIG)?).map_err(|e| bad(keys::CONFIG, e.to_string()))?;
+    let mut config_json: serde_json::Value = serde_json::from_str(field(keys::CONFIG)?).map_err(|e| bad(keys::CONFIG, e.to_string()))?;
+    // U-Net files written before the compositor was recorded were trained with the convex blend.
+    if let Some(mskp) = config_json.get_mut("mskp").and_then(|v| v.as_object_mut()) {
+        mskp.entry("compositor").or_insert_with(|| serde_json::json!(ScaleCompositor::ConvexBlend));
+    }
+    let config: DenoiserConfig = serde_json::from_value(config_json).map_err(|e| bad(keys::CONFIG, e.to_string()))?;
     check_config(&config).map_err(|e| bad(keys::CONFIG, e))?;
     let name = field(keys::METHOD)?;
     let method = Method::parse(name).ok_or_else(|| bad(keys::METHOD, format!("unknown method `{name}`")))?;

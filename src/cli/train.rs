@@ -29,10 +29,11 @@ pub struct TrainArgs {
     /// radiance-only (E sees only I_G, I_P).
     #[arg(long)]
     pub ablation: Option<String>,
-    /// Trained G model (weights file) the guided model starts from.
+    /// Trained G model (weights file) the guided model starts from; with --method g, the model
+    /// this run continues from (warm start: new stages, fresh optimiser).
     #[arg(long)]
     pub from_g: Option<PathBuf>,
-    /// Trained P model the guided model starts from.
+    /// Trained P model the guided model starts from; with --method p, the warm start.
     #[arg(long)]
     pub from_p: Option<PathBuf>,
     /// Network sizes: default (multi-scale kernel-predicting U-Net columns), half (50 % of
@@ -62,9 +63,11 @@ pub struct TrainArgs {
     #[arg(long)]
     pub resume: bool,
     /// Input patch side in pixels (the output is smaller by twice the model margin).
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = 96)]
     pub patch: usize,
-    #[arg(long, default_value_t = 4)]
+    /// Patches per step (the default 2×96² feeds as many pixels as 4×64² and lets the coarsest
+    /// of the U-Net's five kernel scales see 6×6 px instead of 4×4).
+    #[arg(long, default_value_t = 2)]
     pub batch: usize,
     /// Sample counts to train on (default: every noisy_<S>spp.exr of the dataset).
     #[arg(long, value_delimiter = ',')]
@@ -171,22 +174,23 @@ const fn item(name: &'static str, method: &'static str, ablation: Option<&'stati
     PlanItem { name, method, ablation, preset, steps, secs_per_step }
 }
 
-/// The runs of 2026-11-25 (docs/training.md, the backbone race and docs/denoiser.md): step
-/// counts that fill ≈ 20 min per pretraining run and ≈ 15 min per joint run at the seconds per
-/// step measured there (one thread each, two runs side by side), no finetune stage (it does not
-/// move a model at 1e-6 in runs this short). ≈ 2 h for the whole plan.
+/// The runs of 2026-11-25 (docs/denoiser.md, "The shipped weights"): step counts that fill
+/// ≈ 30–36 min per pretraining run and ≈ 16 min per joint run at the seconds per step measured
+/// there (one thread each, two runs side by side, patch 96, batch 2); g ends with the
+/// tone-mapped finetune. both keeps its earlier count: no both run of the current U-Net has
+/// trained stably yet (docs/training.md). ≈ 3 h for the whole plan.
 const PLAN: [PlanItem; 10] = [
-    item("g", "g", None, "default", [2600, 0, 0], 0.47),
-    item("p", "p", None, "default", [500, 0, 0], 2.43),
+    item("g", "g", None, "default", [2900, 400, 0], 0.63),
+    item("p", "p", None, "default", [600, 0, 0], 3.4),
     item("both", "both", None, "default", [250, 0, 0], 3.5),
-    item("guided", "guided", None, "default", [0, 0, 170], 5.0),
-    item("fix-n-train", "guided", Some("fix-n-train"), "default", [0, 0, 170], 1.5),
-    item("radiance-only", "guided", Some("radiance-only"), "default", [0, 0, 170], 5.0),
+    item("guided", "guided", None, "default", [0, 0, 200], 4.5),
+    item("fix-n-train", "guided", Some("fix-n-train"), "default", [0, 0, 200], 1.5),
+    item("radiance-only", "guided", Some("radiance-only"), "default", [0, 0, 200], 4.5),
     item("full-n-full", "guided", Some("full-n-full"), "default", [0, 0, 400], 5.0),
     // The half models get their default twins' step counts, so the sizes differ only in width.
-    item("g", "g", None, "half", [2600, 0, 0], 0.35),
-    item("p", "p", None, "half", [500, 0, 0], 2.0),
-    item("guided", "guided", None, "half", [0, 0, 170], 4.0),
+    item("g", "g", None, "half", [2900, 400, 0], 0.45),
+    item("p", "p", None, "half", [600, 0, 0], 2.5),
+    item("guided", "guided", None, "half", [0, 0, 200], 3.5),
 ];
 
 fn run_all(a: TrainArgs) -> Result<()> {

@@ -27,7 +27,7 @@ use burn::module::{Module, ModuleVisitor, ParamId};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor};
 
-use crate::loss::{l1, path_disentangling_loss, rel_mse_val};
+use crate::loss::{l1, l1_tonemapped, path_disentangling_loss, rel_mse_val};
 use crate::method::{BranchNets, Method, MethodModel, MethodOutput};
 use crate::model::DenoiserConfig;
 use crate::preprocess::TargetTensors;
@@ -138,7 +138,7 @@ fn load_pretrained(path: &Path, want: Method, cfg: &DenoiserConfig, device: &Dev
     if l.method != want {
         return Err(TrainError::Options(format!("{}: holds a {} model, expected {want}", path.display(), l.method)));
     }
-    let sizes = |c: &DenoiserConfig| (serde_json::to_string(&c.kpcn).unwrap_or_default(), serde_json::to_string(&c.pathnet).unwrap_or_default());
+    let sizes = |c: &DenoiserConfig| [serde_json::to_string(&c.kpcn), serde_json::to_string(&c.pathnet), serde_json::to_string(&c.mskp)].map(Result::unwrap_or_default);
     if sizes(&l.config) != sizes(cfg) {
         return Err(TrainError::Options(format!(
             "{}: trained with other network sizes (preset `{}`) than this run's; pass the matching --preset",
@@ -157,6 +157,12 @@ pub fn initial_model(opts: &TrainOptions, from_g: Option<&Path>, from_p: Option<
         return Err(TrainError::Options(format!("ablations apply to the guided method, not {}", opts.method)));
     }
     let mut model = MethodModel::init(&cfg, opts.method, device);
+    // A single-column method may start from a trained model of its own kind (warm start).
+    match (opts.method, from_g, from_p) {
+        (Method::G, Some(g), None) => model = load_pretrained(g, Method::G, &cfg, device)?,
+        (Method::P, None, Some(p)) => model = load_pretrained(p, Method::P, &cfg, device)?,
+        _ => {}
+    }
     if schedule::needs_pretrained(opts.method, opts.ablation) {
         let (Some(g), Some(p)) = (from_g, from_p) else {
             return Err(TrainError::Options("the guided method starts from trained G and P models: give --from-g and --from-p".into()));
@@ -210,6 +216,7 @@ fn e_ids(model: &MethodModel) -> Vec<ParamId> {
 pub fn stage_loss(out: MethodOutput, t: &TargetTensors, stage: &Stage, rng: &mut SplitMix64) -> Tensor<1> {
     match stage.kind {
         StageKind::Finetune => l1(out.radiance, t.total.clone()),
+        StageKind::FinetuneToneMapped => l1_tonemapped(out.radiance, t.total.clone()),
         StageKind::Branches | StageKind::Joint => {
             let mut loss = l1(out.diffuse.output, t.diffuse.clone()) + l1(out.specular.output, t.specular.clone());
             if stage.w_path > 0.0 {

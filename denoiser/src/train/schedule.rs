@@ -11,6 +11,11 @@ pub enum StageKind {
     Branches,
     /// L1 on the recombined linear radiance; no L_path (method.md §4.3).
     Finetune,
+    /// L1 on the recombined radiance after the evaluation's tone map (a) of method.md §7.3
+    /// ([`crate::loss::l1_tonemapped`]); the U-Net presets' finetune. Linear L1 lets a shadow
+    /// pixel borrow its lit neighbour's light at almost no cost, while the test relMSE counts
+    /// that as a large relative error (docs/denoiser.md, "Error floors").
+    FinetuneToneMapped,
     /// Guided: per-branch L1 on I_E + w_path·L_path, E and the rest at their own rates.
     Joint,
 }
@@ -20,6 +25,7 @@ impl StageKind {
         match self {
             StageKind::Branches => "branches",
             StageKind::Finetune => "finetune",
+            StageKind::FinetuneToneMapped => "finetune-tonemapped",
             StageKind::Joint => "joint",
         }
     }
@@ -115,6 +121,9 @@ pub struct ScheduleOptions {
     pub lr_scratch: f64,
     pub w_path: f64,
     pub lr_shape: LrShape,
+    /// Finetune with [`StageKind::FinetuneToneMapped`] instead of the paper's linear L1.
+    #[serde(default)]
+    pub finetune_tonemapped: bool,
 }
 
 impl Default for ScheduleOptions {
@@ -132,6 +141,7 @@ impl Default for ScheduleOptions {
             lr_scratch: 1e-4,
             w_path: 0.1,
             lr_shape: LrShape::WarmupCosine { warmup: 0.05 },
+            finetune_tonemapped: false,
         }
     }
 }
@@ -140,14 +150,23 @@ impl ScheduleOptions {
     /// The defaults with the rates of `config`'s backbone: the paper's for a KPCN; for the
     /// multi-scale U-Net its measured peak ([`DenoiserConfig::peak_lr`]) for pretraining and
     /// from-scratch runs, and for the joint stage E at half of it (E starts fresh) and the
-    /// pretrained columns and PathNets at a twentieth (they only adapt to the blend).
+    /// pretrained columns and PathNets at a twentieth (they only adapt to the blend); its
+    /// finetune is tone-mapped, at a fifth of the peak (measured 2026-11-25, docs/training.md).
     pub fn for_config(config: &DenoiserConfig) -> Self {
         let d = Self::default();
         if config.mskp.is_none() {
             return d;
         }
         let peak = config.peak_lr();
-        ScheduleOptions { lr_branches: peak, lr_scratch: peak, lr_joint_e: peak / 2.0, lr_joint_rest: peak / 20.0, ..d }
+        ScheduleOptions {
+            lr_branches: peak,
+            lr_scratch: peak,
+            lr_joint_e: peak / 2.0,
+            lr_joint_rest: peak / 20.0,
+            lr_finetune: peak / 5.0,
+            finetune_tonemapped: true,
+            ..d
+        }
     }
 }
 
@@ -167,7 +186,9 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
         }
         (m, _) => vec![
             Stage { kind: StageKind::Branches, steps: o.branch_steps, lr_rest: Some(o.lr_branches), lr_e: None, w_path: path(m), shape: o.lr_shape },
-            Stage { kind: StageKind::Finetune, steps: o.finetune_steps, lr_rest: Some(o.lr_finetune), lr_e: None, w_path: 0.0, shape: o.lr_shape },
+            Stage {
+                kind: if o.finetune_tonemapped { StageKind::FinetuneToneMapped } else { StageKind::Finetune },
+                steps: o.finetune_steps, lr_rest: Some(o.lr_finetune), lr_e: None, w_path: 0.0, shape: o.lr_shape },
         ],
     }
 }
