@@ -43,7 +43,7 @@ pub struct Original {
 
 impl Original {
     pub fn of(scene: &Scene) -> Original {
-        let fov_deg = 2.0 * scene.camera.tan_half_fov.atan().to_degrees();
+        let fov_deg = 2.0 * scene.camera.tan_half_vfov().atan().to_degrees();
         let has_environment = scene.lights.env_radiance(Vec3::Y).max_element() > 0.0
             || scene.lights.env_radiance(Vec3::X).max_element() > 0.0;
         // E_h/π of the environment by the midpoint rule on a 32 × 64 (θ, φ) grid of the upper

@@ -1,7 +1,8 @@
 //! The Mitsuba XML loader (renderer/src/scene/mitsuba.rs) on the shipped "Veach, Ajar" scene
 //! and on small hand-written scenes, including the errors for what it does not read.
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
+use renderer::camera::FovAxis;
 use renderer::scene::{load_description, ColorParam, MaterialKind};
 use std::path::{Path, PathBuf};
 
@@ -76,7 +77,8 @@ fn veach_ajar_loads_with_its_shapes_materials_emitter_and_camera() {
     assert!(cam.up.dot(Vec3::new(-0.0319925, 0.999478, -0.00443408)) > 0.9999, "up {}", cam.up);
     assert_eq!((cam.width, cam.height), (1280, 720));
     // fov 60° along x (Mitsuba's default axis): vertical = 2·atan(tan 30° · 720/1280) ≈ 36.0°.
-    let vfov = 2.0 * cam.tan_half_fov.atan().to_degrees();
+    assert_eq!(cam.fov_axis, FovAxis::X);
+    let vfov = 2.0 * cam.tan_half_vfov().atan().to_degrees();
     assert!((vfov - 35.98).abs() < 0.02, "{vfov}");
     // maxDepth 13 = 12 scattering events; 64 samples from the sampler.
     assert_eq!(d.settings.max_bounces, 12);
@@ -150,4 +152,76 @@ fn defaults_refs_primitives_and_emitters() {
 
     let e = load_err("nodefault", "<scene version=\"0.5.0\">\n<bsdf type=\"diffuse\" id=\"d\"><float name=\"reflectance\" value=\"$missing\"/></bsdf>\n</scene>");
     assert!(e.contains("line 2") && e.contains("$missing"), "{e}");
+}
+
+// ---------------------------------------------------------------- camera: fov axis and --size
+
+/// The test scene (scenes/veach-ajar/scene.xml) with its asset paths made absolute and its film
+/// set to `w` × `h`.
+fn veach_test_scene(w: u32, h: u32) -> String {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/veach-ajar/scene.xml");
+    let xml = std::fs::read_to_string(&p).unwrap().replace("../assets/veach-ajar", "ASSETS");
+    let (w0, h0) = (r#"<default name="width" value="176" />"#, r#"<default name="height" value="128" />"#);
+    assert!(xml.contains(w0) && xml.contains(h0), "the test scene's film defaults changed");
+    xml.replace(w0, &format!(r#"<default name="width" value="{w}" />"#)).replace(h0, &format!(r#"<default name="height" value="{h}" />"#))
+}
+
+#[test]
+fn a_new_image_size_keeps_the_mitsuba_view() {
+    // What `pixguide render scenes/veach-ajar/scene.xml --size 320x180` does (src/cli/render.rs
+    // sets the camera's width and height) against the same XML with a 320×180 film.
+    let mut resized = load_xml("size-176", &veach_test_scene(176, 128)).unwrap_or_else(|e| panic!("{e}")).camera;
+    resized.width = 320;
+    resized.height = 180;
+    let direct = load_xml("size-320", &veach_test_scene(320, 180)).unwrap_or_else(|e| panic!("{e}")).camera;
+    assert_eq!((direct.width, direct.height), (320, 180));
+    for y in [0.0, 0.5, 37.25, 90.0, 179.5, 180.0] {
+        for x in [0.0, 0.5, 101.75, 160.0, 319.5, 320.0] {
+            let f = Vec2::new(x, y);
+            assert_eq!(resized.ray(f).dir, direct.ray(f).dir, "ray through pixel position {f}");
+            assert_eq!(resized.ray(f).origin, direct.ray(f).origin);
+        }
+    }
+    // Both keep the declared 60° across the image (Mitsuba's default fov axis is x).
+    let t = 30f32.to_radians().tan();
+    for cam in [&resized, &direct] {
+        let e = cam.tan_half_extent();
+        assert!((e.x - t).abs() < 1e-6 && (e.y - t * 180.0 / 320.0).abs() < 1e-6, "{e}");
+    }
+}
+
+#[test]
+fn each_fov_axis_gives_its_half_angle_tangent() {
+    // A 64 × 32 film with fov 45°: t = tan 22.5° along the named extent.
+    let t = 22.5f32.to_radians().tan();
+    let diag = (64f32 * 64.0 + 32.0 * 32.0).sqrt();
+    let cases = [
+        ("x", FovAxis::X, Vec2::new(t, t / 2.0)),
+        ("y", FovAxis::Y, Vec2::new(2.0 * t, t)),
+        ("diagonal", FovAxis::Diagonal, Vec2::new(t * 64.0 / diag, t * 32.0 / diag)),
+        // The film is wider than high: its smaller extent is the height.
+        ("smaller", FovAxis::Smaller, Vec2::new(2.0 * t, t)),
+        ("larger", FovAxis::Larger, Vec2::new(t, t / 2.0)),
+    ];
+    for (spelling, tag) in [("fovAxis", "0.5.0"), ("fov_axis", "3.0.0")] {
+        for (name, axis, want) in cases {
+            let xml = format!(
+                r#"<scene version="{tag}"><sensor type="perspective"><float name="fov" value="45"/><string name="{spelling}" value="{name}"/>
+  <transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+  <film type="hdrfilm"><integer name="width" value="64"/><integer name="height" value="32"/></film></sensor>
+  <shape type="cube"/></scene>"#
+            );
+            let cam = load_xml(&format!("axis-{name}-{spelling}"), &xml).unwrap_or_else(|e| panic!("{e}")).camera;
+            assert_eq!(cam.fov_axis, axis);
+            let got = cam.tan_half_extent();
+            assert!((got - want).abs().max_element() < 1e-6, "{spelling}={name}: {got} vs {want}");
+            // The ray to the middle of the right edge and of the top edge.
+            let d = cam.ray(Vec2::new(64.0, 16.0)).dir;
+            assert!((d.dot(cam.right) / d.dot(cam.forward) - want.x).abs() < 1e-5, "{name}: right edge");
+            let d = cam.ray(Vec2::new(32.0, 0.0)).dir;
+            assert!((d.dot(cam.up) / d.dot(cam.forward) - want.y).abs() < 1e-5, "{name}: top edge");
+        }
+    }
+    let e = load_err("axis-bad", "<scene version=\"0.5.0\">\n<sensor type=\"perspective\"><float name=\"fov\" value=\"45\"/>\n<string name=\"fovAxis\" value=\"z\"/></sensor>\n</scene>");
+    assert!(e.contains("line 3") && e.contains("\"z\"") && e.contains("fov axis"), "{e}");
 }

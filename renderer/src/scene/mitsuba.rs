@@ -13,7 +13,7 @@ use super::obj::MaterialChoice;
 use super::primitives::{self, TriMesh};
 use super::toml_format::CONDUCTOR_PRESETS;
 use super::{obj, ColorParam, Material, MaterialKind, RenderSettings, SceneDescription};
-use crate::camera::Camera;
+use crate::camera::{Camera, FovAxis};
 use crate::light::Environment;
 use crate::texture::srgb_to_linear;
 use crate::{Error, Result};
@@ -22,7 +22,7 @@ use roxmltree::{Document, Node};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-/// Mitsuba's default film size (768 × 576) and field of view axis ("x").
+/// Mitsuba's default film size (768 × 576).
 const DEFAULT_FILM: (u32, u32) = (768, 576);
 
 /// Named dielectrics of Mitsuba's IOR table (the ones scenes use), at 589 nm.
@@ -360,13 +360,16 @@ impl<'a, 'i> Loader<'a, 'i> {
         if t != "perspective" {
             return Err(self.err(n, format!("unsupported sensor type \"{t}\" (only perspective)")));
         }
-        let (mut fov, mut axis, mut to_world) = (None, "x".to_string(), Mat4::IDENTITY);
+        let (mut fov, mut axis, mut to_world) = (None, FovAxis::X, Mat4::IDENTITY);
         let (mut w, mut h) = DEFAULT_FILM;
         for c in Self::elements(n) {
             let name = c.attribute("name").unwrap_or("");
             match (c.tag_name().name(), name) {
                 ("float", "fov") => fov = Some(self.float(c)?),
-                ("string", "fovAxis") => axis = self.required(c, "value")?,
+                ("string", "fovAxis" | "fov_axis") => {
+                    let v = self.required(c, "value")?;
+                    axis = FovAxis::parse(&v).ok_or_else(|| self.err(c, format!("unknown fov axis \"{v}\" (x, y, diagonal, smaller, larger)")))?;
+                }
                 ("transform", "toWorld" | "to_world") => to_world = self.transform(c)?,
                 // Clip planes and focus distance change nothing for a pinhole camera without clipping.
                 ("float", "nearClip" | "farClip" | "focusDistance" | "shutterOpen" | "shutterClose") => {}
@@ -403,17 +406,6 @@ impl<'a, 'i> Loader<'a, 'i> {
         if !(fov > 0.0 && fov < 180.0) {
             return Err(self.err(n, format!("fov {fov} is outside (0, 180) degrees")));
         }
-        let (wf, hf) = (w as f32, h as f32);
-        // tan(vertical/2) = tan(fov/2) · (height / length of the side the fov spans).
-        let span = match axis.as_str() {
-            "x" => wf,
-            "y" => hf,
-            "diagonal" => (wf * wf + hf * hf).sqrt(),
-            "smaller" => wf.min(hf),
-            "larger" => wf.max(hf),
-            other => return Err(self.err(n, format!("unknown fovAxis \"{other}\" (x, y, diagonal, smaller, larger)"))),
-        };
-        let vfov = 2.0 * ((fov.to_radians() * 0.5).tan() * hf / span).atan().to_degrees();
         // Mitsuba cameras look along +Z with +Y up; +X is the image's left.
         let position = to_world.transform_point3(Vec3::ZERO);
         let forward = to_world.transform_vector3(Vec3::Z).normalize_or_zero();
@@ -422,7 +414,9 @@ impl<'a, 'i> Loader<'a, 'i> {
         if left.dot(up.cross(forward)) < 0.0 {
             self.warn(n, "the camera transform mirrors the image; rendering it unmirrored");
         }
-        Camera::look_at(position, position + forward, up, vfov, w, h).ok_or_else(|| self.err(n, "degenerate camera transform (zero or parallel view and up)"))
+        // The camera keeps the axis, so that a new image size (`--size`) keeps the angle along
+        // it, as Mitsuba does when the film alone changes.
+        Camera::look_at_axis(position, position + forward, up, fov, axis, w, h).ok_or_else(|| self.err(n, "degenerate camera transform (zero or parallel view and up)"))
     }
 
     fn dim(&self, n: Node<'a, 'i>) -> Result<u32> {
