@@ -137,12 +137,12 @@ fn random_material(orig: &Material, rng: &mut Pcg32) -> Material {
     }
     m.kind = match &orig.kind {
         MaterialKind::Dielectric { ior, tint, .. } => MaterialKind::Dielectric { ior: *ior, roughness: roughness(rng), tint: *tint },
-        MaterialKind::Conductor { eta, k, specular_tint, .. } => MaterialKind::Conductor { eta: *eta, k: *k, roughness: roughness(rng), specular_tint: *specular_tint },
+        MaterialKind::Conductor { eta, k, specular_tint, .. } => MaterialKind::Conductor { eta: *eta, k: *k, roughness: roughness(rng), specular_tint: specular_tint.clone() },
         MaterialKind::Lambert { albedo } | MaterialKind::Plastic { albedo, .. } => {
             let colour = Vec3::new(uniform(rng, 0.01, 1.0), uniform(rng, 0.01, 1.0), uniform(rng, 0.01, 1.0));
             // Keep textures half of the time: they carry the fine detail denoisers must keep.
             let albedo = match albedo {
-                ColorParam::Texture { .. } if rng.next_f32() < 0.5 => albedo.clone(),
+                ColorParam::Texture { .. } | ColorParam::Checkerboard { .. } if rng.next_f32() < 0.5 => albedo.clone(),
                 _ => ColorParam::Const(colour),
             };
             if rng.next_f32() < 0.6 {

@@ -5,8 +5,9 @@
 //! Everything the loader does not understand is an error naming the file, the line and the
 //! element (`scene.xml: line 12 <bsdf type="hair">: unsupported BSDF type`), never a silent
 //! default: a scene that renders differently from what its author made would poison a test.
-//! The few things that are read but approximated (a textured specular reflectance becomes its
-//! mean, a one-sided diffuse becomes two-sided) print a warning.
+//! The few things that are read but approximated (a textured dielectric or plastic specular
+//! reflectance becomes its mean, a one-sided diffuse becomes two-sided) print a warning.
+//! Texture lookups (`bitmap`, `checkerboard`) follow Mitsuba 3, which agrees with 0.6 on uv ≥ 0.
 
 use super::builder::{check_resolution, warn, Builder};
 use super::obj::MaterialChoice;
@@ -17,7 +18,7 @@ use crate::camera::{Camera, FovAxis};
 use crate::light::Environment;
 use crate::texture::srgb_to_linear;
 use crate::{Error, Result};
-use glam::{Mat3, Mat4, Vec3};
+use glam::{Affine2, Mat3, Mat4, Vec2, Vec3};
 use roxmltree::{Document, Node};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -82,10 +83,17 @@ struct BsdfDef {
     kind: MaterialKind,
 }
 
-/// A colour parameter: a constant or a texture node (resolved when the material is built).
+/// A colour parameter: a constant or a texture node (resolved when the material is built),
+/// with the name of the BSDF parameter that holds it (errors name it).
 enum Spectrum<'a, 'i> {
     Const(Vec3),
-    Texture(Node<'a, 'i>),
+    Texture { node: Node<'a, 'i>, param: String },
+}
+
+/// A texture as read from the XML, before its image is loaded.
+enum TextureDef {
+    Bitmap { file: PathBuf, to_uv: Affine2 },
+    Checkerboard { color0: Vec3, color1: Vec3, to_uv: Affine2 },
 }
 
 struct Loader<'a, 'i> {
@@ -426,92 +434,142 @@ impl<'a, 'i> Loader<'a, 'i> {
 
     /// A colour parameter: constant, an inline texture, or a `<ref>` to a texture.
     fn spectrum(&self, n: Node<'a, 'i>) -> Result<Spectrum<'a, 'i>> {
+        let param = n.attribute("name").unwrap_or("(unnamed)").to_string();
         match n.tag_name().name() {
             "rgb" | "srgb" | "spectrum" => Ok(Spectrum::Const(self.color(n)?)),
             "float" => Ok(Spectrum::Const(Vec3::splat(self.float(n)?.max(0.0)))),
-            "texture" => Ok(Spectrum::Texture(n)),
+            "texture" => Ok(Spectrum::Texture { node: n, param }),
             "ref" => {
                 let id = self.required(n, "id")?;
-                self.textures.get(&id).map(|&t| Spectrum::Texture(t)).ok_or_else(|| self.err(n, format!("no <texture id=\"{id}\"> defined before this")))
+                let node = *self.textures.get(&id).ok_or_else(|| self.err(n, format!("no <texture id=\"{id}\"> defined before this")))?;
+                Ok(Spectrum::Texture { node, param })
             }
             other => Err(self.err(n, format!("<{other}> is not a colour"))),
         }
     }
 
-    /// A texture as an albedo: bitmaps load as images; other textures become their mean colour.
-    fn albedo(&mut self, s: Spectrum<'a, 'i>) -> Result<ColorParam> {
+    /// Where a texture is in the file and which BSDF parameter uses it, for errors:
+    /// `line 79 <texture type="bitmap"> (specularReflectance)`.
+    fn texture_field(&self, t: Node<'a, 'i>, param: &str) -> String {
+        format!("{} ({param})", self.describe(t))
+    }
+
+    /// Reads a `bitmap` or `checkerboard` texture. Texture coordinates are mapped by Mitsuba
+    /// 3's `to_uv` transform or Mitsuba 0.6's `uscale`/`vscale`/`uoffset`/`voffset`
+    /// (uv · scale + offset).
+    fn texture_def(&self, t: Node<'a, 'i>, param: &str) -> Result<TextureDef> {
+        let field = self.texture_field(t, param);
+        let fail = |n: Node<'a, 'i>, msg: String| {
+            let at = if n == t { field.clone() } else { format!("{} in {field}", self.describe(n)) };
+            Error::scene(&self.file, at, msg)
+        };
+        let ty = self.attr(t, "type")?.ok_or_else(|| fail(t, "missing attribute `type`".into()))?;
+        if !matches!(ty.as_str(), "bitmap" | "checkerboard") {
+            return Err(fail(t, format!("unsupported texture type \"{ty}\" (bitmap, checkerboard)")));
+        }
+        let (mut scale, mut offset, mut to_uv, mut old_style) = (Vec2::ONE, Vec2::ZERO, None, false);
+        let (mut file, mut color0, mut color1) = (None, Vec3::splat(0.4), Vec3::splat(0.2));
+        for c in Self::elements(t) {
+            let name = c.attribute("name").unwrap_or("");
+            match (ty.as_str(), c.tag_name().name(), name) {
+                (_, "float", "uscale" | "vscale" | "uoffset" | "voffset") => {
+                    let v = self.float(c)?;
+                    old_style = true;
+                    match name {
+                        "uscale" => scale.x = v,
+                        "vscale" => scale.y = v,
+                        "uoffset" => offset.x = v,
+                        _ => offset.y = v,
+                    }
+                }
+                (_, "transform", "to_uv" | "toUV") => {
+                    // The 2-D affine part: x and y rows, x and y columns and the translation.
+                    let m = self.transform(c)?;
+                    to_uv = Some(Affine2::from_cols(m.x_axis.truncate().truncate(), m.y_axis.truncate().truncate(), m.w_axis.truncate().truncate()));
+                }
+                ("bitmap", "string", "filename") => file = Some(self.required(c, "value")?),
+                // Filtering: ours is bilinear (no MIP maps).
+                ("bitmap", "string", "filterType" | "filter_type") | ("bitmap", "float", "maxAnisotropy") | ("bitmap", "boolean", "cache") => {}
+                ("bitmap", "string", "wrapMode" | "wrapModeU" | "wrapModeV" | "wrap_mode") => {
+                    let v = self.required(c, "value")?;
+                    if v != "repeat" {
+                        self.warn(c, format!("{param}: wrap mode \"{v}\" becomes repeat"));
+                    }
+                }
+                ("bitmap", "float", "gamma") => {
+                    let g = self.float(c)?;
+                    if g != -1.0 && (g - 2.2).abs() > 1e-3 {
+                        return Err(fail(c, format!("gamma {g} is not supported (8-bit images are read as sRGB, float images as linear)")));
+                    }
+                }
+                ("bitmap", "boolean", "raw") => {
+                    if self.boolean(c)? {
+                        return Err(fail(c, "raw=true is not supported (8-bit images are always read as sRGB)".into()));
+                    }
+                }
+                ("checkerboard", _, "color0" | "color1") => {
+                    let v = match c.tag_name().name() {
+                        "float" => Vec3::splat(self.float(c)?.max(0.0)),
+                        "rgb" | "srgb" | "spectrum" => self.color(c)?,
+                        other => return Err(fail(c, format!("{name} must be a constant colour, not <{other}>"))),
+                    };
+                    if name == "color0" {
+                        color0 = v
+                    } else {
+                        color1 = v
+                    }
+                }
+                _ => return Err(fail(c, format!("unsupported {ty} parameter"))),
+            }
+        }
+        let to_uv = match (to_uv, old_style) {
+            (Some(_), true) => return Err(fail(t, "give either to_uv or uscale/vscale/uoffset/voffset, not both".into())),
+            (Some(m), false) => m,
+            (None, _) => Affine2::from_scale_angle_translation(scale, 0.0, offset),
+        };
+        if !to_uv.is_finite() {
+            return Err(fail(t, "the texture coordinate transform is not finite".into()));
+        }
+        Ok(match ty.as_str() {
+            "bitmap" => {
+                let file = file.ok_or_else(|| fail(t, "a bitmap needs <string name=\"filename\">".into()))?;
+                TextureDef::Bitmap { file: self.dir.join(file), to_uv }
+            }
+            _ => TextureDef::Checkerboard { color0, color1, to_uv },
+        })
+    }
+
+    /// A colour parameter that may vary over the surface (diffuse reflectance, a conductor's
+    /// specular reflectance): constants and checkerboards as they are, bitmaps loaded as
+    /// textures, all values capped at 1 (a reflectance).
+    fn color_param(&mut self, s: Spectrum<'a, 'i>) -> Result<ColorParam> {
         match s {
             Spectrum::Const(c) => Ok(ColorParam::Const(c.min(Vec3::ONE))),
-            Spectrum::Texture(t) => {
-                let ty = self.required(t, "type")?;
-                if ty != "bitmap" {
-                    let mean = self.texture_mean(t)?;
-                    self.warn(t, format!("a \"{ty}\" texture becomes its mean colour {mean}"));
-                    return Ok(ColorParam::Const(mean.min(Vec3::ONE)));
+            Spectrum::Texture { node, param } => match self.texture_def(node, &param)? {
+                TextureDef::Bitmap { file, to_uv } => {
+                    let field = self.texture_field(node, &param);
+                    let index = self.b.albedo_texture(&file, &field)?;
+                    Ok(ColorParam::Texture { index, scale: Vec3::ONE, to_uv })
                 }
-                let mut file = None;
-                for c in Self::elements(t) {
-                    match (c.tag_name().name(), c.attribute("name").unwrap_or("")) {
-                        ("string", "filename") => file = Some(self.required(c, "value")?),
-                        // Filtering and wrapping: ours is bilinear and repeating.
-                        ("string", "filterType" | "wrapMode" | "wrapModeU" | "wrapModeV" | "filter_type" | "wrap_mode") => {}
-                        ("float", "maxAnisotropy") | ("boolean", "cache") => {}
-                        ("float", "gamma") => {
-                            let g = self.float(c)?;
-                            if g != -1.0 && (g - 2.2).abs() > 1e-3 {
-                                return Err(self.err(c, format!("gamma {g} is not supported (images are read as sRGB)")));
-                            }
-                        }
-                        ("float", "uscale" | "vscale" | "uoffset" | "voffset") => {
-                            let (v, name) = (self.float(c)?, c.attribute("name").unwrap());
-                            let identity = if name.ends_with("scale") { 1.0 } else { 0.0 };
-                            if v != identity {
-                                return Err(self.err(c, format!("texture coordinate {name} {v} is not supported")));
-                            }
-                        }
-                        _ => return Err(self.err(c, "unsupported bitmap parameter")),
-                    }
+                TextureDef::Checkerboard { color0, color1, to_uv } => {
+                    Ok(ColorParam::Checkerboard { color0: color0.min(Vec3::ONE), color1: color1.min(Vec3::ONE), to_uv })
                 }
-                let file = file.ok_or_else(|| self.err(t, "a bitmap needs <string name=\"filename\">"))?;
-                let field = self.describe(t);
-                Ok(ColorParam::Texture { index: self.b.albedo_texture(&self.dir.join(&file), &field)?, scale: Vec3::ONE })
-            }
+            },
         }
     }
 
-    /// Mean colour of a procedural texture (checkerboard: the mean of its two colours).
-    fn texture_mean(&self, t: Node<'a, 'i>) -> Result<Vec3> {
-        let ty = self.required(t, "type")?;
-        match ty.as_str() {
-            "checkerboard" => {
-                let (mut c0, mut c1) = (Vec3::splat(0.4), Vec3::splat(0.2));
-                for c in Self::elements(t) {
-                    match (c.tag_name().name(), c.attribute("name").unwrap_or("")) {
-                        (_, "color0") => c0 = self.color(c)?,
-                        (_, "color1") => c1 = self.color(c)?,
-                        ("float", "uscale" | "vscale" | "uoffset" | "voffset") => {}
-                        _ => return Err(self.err(c, "unsupported checkerboard parameter")),
-                    }
-                }
-                Ok((c0 + c1) * 0.5)
-            }
-            "bitmap" => {
-                let file = Self::elements(t)
-                    .find(|c| c.attribute("name") == Some("filename"))
-                    .ok_or_else(|| self.err(t, "a bitmap needs <string name=\"filename\">"))?;
-                let file = self.required(file, "value")?;
-                let img = super::image_io::load_image(&self.dir.join(file), &self.file, &self.describe(t))?;
-                Ok(img.mean())
-            }
-            other => Err(self.err(t, format!("unsupported texture type \"{other}\""))),
-        }
-    }
-
-    /// A constant colour or a texture's mean, for parameters that cannot vary over a surface.
+    /// A constant colour or a texture's mean, for parameters that cannot vary over a surface;
+    /// `true` if it was a texture.
     fn mean_color(&self, s: Spectrum<'a, 'i>) -> Result<(Vec3, bool)> {
         match s {
             Spectrum::Const(c) => Ok((c, false)),
-            Spectrum::Texture(t) => Ok((self.texture_mean(t)?, true)),
+            Spectrum::Texture { node, param } => {
+                let mean = match self.texture_def(node, &param)? {
+                    TextureDef::Bitmap { file, .. } => super::image_io::load_image(&file, &self.file, &self.texture_field(node, &param))?.mean(),
+                    TextureDef::Checkerboard { color0, color1, .. } => (color0 + color1) * 0.5,
+                };
+                Ok((mean, true))
+            }
         }
     }
 
@@ -615,11 +673,11 @@ impl<'a, 'i> Loader<'a, 'i> {
         };
         let kind = match ty.as_str() {
             "diffuse" | "roughdiffuse" => {
-                let albedo = self.albedo(reflectance.unwrap_or(Spectrum::Const(Vec3::splat(0.5))))?;
+                let albedo = self.color_param(reflectance.unwrap_or(Spectrum::Const(Vec3::splat(0.5))))?;
                 MaterialKind::Lambert { albedo }
             }
             "plastic" | "roughplastic" => {
-                let albedo = self.albedo(reflectance.unwrap_or(Spectrum::Const(Vec3::splat(0.5))))?;
+                let albedo = self.color_param(reflectance.unwrap_or(Spectrum::Const(Vec3::splat(0.5))))?;
                 let s = specular_mean(self, specular, "specular reflectance")?;
                 if (s - Vec3::ONE).abs().max_element() > 1e-3 {
                     self.warn(n, format!("plastic specularReflectance {s} is ignored (the coat reflects by Fresnel alone)"));
@@ -652,7 +710,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                 if e.min_element() <= 0.0 {
                     return Err(self.err(n, format!("eta {e} must be positive")));
                 }
-                let specular_tint = specular_mean(self, specular, "specular reflectance")?;
+                let specular_tint = self.color_param(specular.unwrap_or(Spectrum::Const(Vec3::ONE)))?;
                 MaterialKind::Conductor { eta: e / ext_eta, k: kk / ext_eta, roughness, specular_tint }
             }
             other => return Err(self.err(n, format!("unsupported BSDF type \"{other}\""))),
@@ -734,6 +792,9 @@ impl<'a, 'i> Loader<'a, 'i> {
             self.warn(n, format!("mesh '{}' not found; skipping this shape", p.display()));
             return Ok(());
         }
+        if matches!(ty.as_str(), "cube" | "disk" | "sphere") && kind_is_textured(&def.kind) {
+            self.warn(n, format!("a textured BSDF on a {ty}: its texture coordinates follow our {ty}, not Mitsuba's"));
+        }
         let material = self.material_for(&def, emission);
         let (v0, t0) = (self.b.mesh.positions.len(), self.b.mesh.triangles.len());
         let field = self.describe(n);
@@ -745,7 +806,13 @@ impl<'a, 'i> Loader<'a, 'i> {
                 obj::load(&mut self.b, &p, &to_world, &choice, &field)?;
                 None
             }
-            "rectangle" => Some(primitives::quad()),
+            "rectangle" => {
+                // Mitsuba's rectangle has uv = ((x + 1)/2, (y + 1)/2); our quad puts v = 0 at
+                // y = +1 (the top of an image seen from +Z).
+                let mut q = primitives::quad();
+                q.uvs.iter_mut().for_each(|uv| uv.y = 1.0 - uv.y);
+                Some(q)
+            }
             "cube" => Some(primitives::cube()),
             "disk" => Some(primitives::disk(1.0, 64)),
             "sphere" => Some(primitives::sphere(radius, 64).transformed(&Mat4::from_translation(center))),
@@ -798,5 +865,14 @@ impl<'a, 'i> Loader<'a, 'i> {
             }
         }
         Ok(Environment::Constant(radiance))
+    }
+}
+
+/// Whether any colour of a material varies over the surface.
+fn kind_is_textured(kind: &MaterialKind) -> bool {
+    match kind {
+        MaterialKind::Lambert { albedo } | MaterialKind::Plastic { albedo, .. } => albedo.is_textured(),
+        MaterialKind::Conductor { specular_tint, .. } => specular_tint.is_textured(),
+        MaterialKind::Dielectric { .. } => false,
     }
 }
