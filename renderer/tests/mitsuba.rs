@@ -240,6 +240,32 @@ fn each_fov_axis_gives_its_half_angle_tangent() {
     assert!(e.contains("line 3") && e.contains("\"z\"") && e.contains("fov axis"), "{e}");
 }
 
+#[test]
+fn mitsuba3_parameter_names_are_read() {
+    let xml = r#"<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="4"/></integrator>
+  <sensor type="perspective"><float name="fov" value="30"/><string name="fov_axis" value="Y"/><float name="near_clip" value="0.1"/>
+    <transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <sampler type="independent"><integer name="sample_count" value="12"/></sampler>
+    <film type="hdrfilm"><integer name="width" value="40"/><integer name="height" value="20"/></film></sensor>
+  <bsdf type="roughconductor" id="m"><float name="alpha_u" value="0.2"/><float name="alpha_v" value="0.2"/>
+    <texture type="checkerboard" name="specular_reflectance"><transform name="to_uv"><scale value="3"/></transform></texture></bsdf>
+  <shape type="rectangle"><ref id="m"/></shape>
+</scene>"#;
+    let d = load_xml("mitsuba3", xml).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((d.settings.max_bounces, d.settings.spp), (3, 12));
+    assert_eq!(d.camera.fov_axis, FovAxis::Y);
+    match &d.materials[0].kind {
+        MaterialKind::Conductor { roughness, specular_tint: ColorParam::Checkerboard { color0, color1, to_uv }, .. } => {
+            assert!((roughness - 0.2).abs() < 1e-6);
+            // Mitsuba's defaults 0.4 and 0.2.
+            assert_eq!((*color0, *color1), (Vec3::splat(0.4), Vec3::splat(0.2)));
+            assert_eq!(to_uv.transform_point2(Vec2::new(1.0, 0.5)), Vec2::new(3.0, 1.5));
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
 // ---------------------------------------------------------------- textures
 
 #[test]

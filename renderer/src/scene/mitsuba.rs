@@ -349,7 +349,7 @@ impl<'a, 'i> Loader<'a, 'i> {
             return Err(self.err(n, format!("unsupported integrator \"{t}\" (path tracers only)")));
         }
         for c in Self::elements(n) {
-            if c.attribute("name") == Some("maxDepth") {
+            if matches!(c.attribute("name"), Some("maxDepth" | "max_depth")) {
                 // Mitsuba's maxDepth counts path segments (2 = direct light only, one scattering
                 // event); −1 means unlimited, for which our default stands.
                 let d = self.integer(c)?;
@@ -380,10 +380,10 @@ impl<'a, 'i> Loader<'a, 'i> {
                 }
                 ("transform", "toWorld" | "to_world") => to_world = self.transform(c)?,
                 // Clip planes and focus distance change nothing for a pinhole camera without clipping.
-                ("float", "nearClip" | "farClip" | "focusDistance" | "shutterOpen" | "shutterClose") => {}
+                ("float", "nearClip" | "farClip" | "focusDistance" | "shutterOpen" | "shutterClose" | "near_clip" | "far_clip" | "focus_distance" | "shutter_open" | "shutter_close") => {}
                 ("sampler", _) => {
                     for s in Self::elements(c) {
-                        if s.attribute("name") == Some("sampleCount") {
+                        if matches!(s.attribute("name"), Some("sampleCount" | "sample_count")) {
                             let spp = self.integer(s)?;
                             if spp < 1 || spp > u32::MAX as i64 {
                                 return Err(self.err(s, format!("sampleCount {spp} must be at least 1")));
@@ -397,7 +397,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                         match (s.tag_name().name(), s.attribute("name").unwrap_or("")) {
                             ("integer", "width") => w = self.dim(s)?,
                             ("integer", "height") => h = self.dim(s)?,
-                            ("integer", "cropOffsetX" | "cropOffsetY" | "cropWidth" | "cropHeight") => {
+                            ("integer", "cropOffsetX" | "cropOffsetY" | "cropWidth" | "cropHeight" | "crop_offset_x" | "crop_offset_y" | "crop_width" | "crop_height") => {
                                 return Err(self.err(s, "film crop windows are not supported"));
                             }
                             // Output format, tone mapping and the reconstruction filter: how
