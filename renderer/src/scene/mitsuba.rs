@@ -766,7 +766,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                     for p in Self::elements(c) {
                         match p.attribute("name") {
                             Some("radiance") => radiance = Some(self.color(p)?),
-                            Some("samplingWeight") => {}
+                            Some("samplingWeight" | "sampling_weight") => {}
                             _ => return Err(self.err(p, "unsupported area emitter parameter")),
                         }
                     }
@@ -860,7 +860,7 @@ impl<'a, 'i> Loader<'a, 'i> {
         for c in Self::elements(n) {
             match c.attribute("name") {
                 Some("radiance") => radiance = self.color(c)?,
-                Some("samplingWeight") => {}
+                Some("samplingWeight" | "sampling_weight") => {}
                 _ => return Err(self.err(c, "unsupported constant emitter parameter")),
             }
         }
