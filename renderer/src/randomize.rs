@@ -43,7 +43,7 @@ pub struct Original {
 
 impl Original {
     pub fn of(scene: &Scene) -> Original {
-        let fov_deg = 2.0 * scene.camera.tan_half_fov.atan().to_degrees();
+        let fov_deg = 2.0 * scene.camera.tan_half_vfov().atan().to_degrees();
         let has_environment = scene.lights.env_radiance(Vec3::Y).max_element() > 0.0
             || scene.lights.env_radiance(Vec3::X).max_element() > 0.0;
         // E_h/π of the environment by the midpoint rule on a 32 × 64 (θ, φ) grid of the upper
@@ -137,12 +137,12 @@ fn random_material(orig: &Material, rng: &mut Pcg32) -> Material {
     }
     m.kind = match &orig.kind {
         MaterialKind::Dielectric { ior, tint, .. } => MaterialKind::Dielectric { ior: *ior, roughness: roughness(rng), tint: *tint },
-        MaterialKind::Conductor { eta, k, specular_tint, .. } => MaterialKind::Conductor { eta: *eta, k: *k, roughness: roughness(rng), specular_tint: *specular_tint },
+        MaterialKind::Conductor { eta, k, specular_tint, .. } => MaterialKind::Conductor { eta: *eta, k: *k, roughness: roughness(rng), specular_tint: specular_tint.clone() },
         MaterialKind::Lambert { albedo } | MaterialKind::Plastic { albedo, .. } => {
             let colour = Vec3::new(uniform(rng, 0.01, 1.0), uniform(rng, 0.01, 1.0), uniform(rng, 0.01, 1.0));
             // Keep textures half of the time: they carry the fine detail denoisers must keep.
             let albedo = match albedo {
-                ColorParam::Texture { .. } if rng.next_f32() < 0.5 => albedo.clone(),
+                ColorParam::Texture { .. } | ColorParam::Checkerboard { .. } if rng.next_f32() < 0.5 => albedo.clone(),
                 _ => ColorParam::Const(colour),
             };
             if rng.next_f32() < 0.6 {

@@ -81,7 +81,7 @@ fn convergence_is_one_over_spp() {
         (quad(), Mat4::from_translation(Vec3::new(-1.0, 1.0, 0.0)) * Mat4::from_rotation_y(std::f32::consts::FRAC_PI_2), with_kind(MaterialKind::Lambert { albedo: renderer::scene::ColorParam::Const(Vec3::new(0.7, 0.1, 0.1)) })),
         (quad(), Mat4::from_translation(Vec3::new(0.0, 2.0, 0.0)) * Mat4::from_rotation_x(std::f32::consts::FRAC_PI_2), lambert(0.7)),
         (quad(), Mat4::from_translation(Vec3::new(0.0, 1.99, 0.0)) * Mat4::from_rotation_x(std::f32::consts::FRAC_PI_2) * Mat4::from_scale(Vec3::splat(0.3)), emitter(Vec3::splat(15.0))),
-        (cube(), Mat4::from_translation(Vec3::new(0.3, 0.3, -0.2)) * Mat4::from_scale(Vec3::splat(0.3)), with_kind(MaterialKind::Conductor { eta: Vec3::new(0.2, 0.9, 1.1), k: Vec3::new(3.9, 2.4, 2.2), roughness: 0.2, specular_tint: Vec3::ONE })),
+        (cube(), Mat4::from_translation(Vec3::new(0.3, 0.3, -0.2)) * Mat4::from_scale(Vec3::splat(0.3)), with_kind(MaterialKind::Conductor { eta: Vec3::new(0.2, 0.9, 1.1), k: Vec3::new(3.9, 2.4, 2.2), roughness: 0.2, specular_tint: renderer::scene::ColorParam::Const(Vec3::ONE) })),
     ];
     let s = scene(box_, Environment::Constant(Vec3::splat(0.2)), cam, vec![]);
     let reference = render(&s, 4096, 999, 5, BufferRequest::RADIANCE_ONLY);

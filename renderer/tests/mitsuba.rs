@@ -1,8 +1,12 @@
 //! The Mitsuba XML loader (renderer/src/scene/mitsuba.rs) on the shipped "Veach, Ajar" scene
 //! and on small hand-written scenes, including the errors for what it does not read.
 
-use glam::Vec3;
-use renderer::scene::{load_description, ColorParam, MaterialKind};
+mod common;
+
+use glam::{Vec2, Vec3};
+use renderer::camera::FovAxis;
+use renderer::film::BufferRequest;
+use renderer::scene::{load_description, ColorParam, MaterialKind, Scene};
 use std::path::{Path, PathBuf};
 
 fn veach() -> PathBuf {
@@ -76,8 +80,20 @@ fn veach_ajar_loads_with_its_shapes_materials_emitter_and_camera() {
     assert!(cam.up.dot(Vec3::new(-0.0319925, 0.999478, -0.00443408)) > 0.9999, "up {}", cam.up);
     assert_eq!((cam.width, cam.height), (1280, 720));
     // fov 60° along x (Mitsuba's default axis): vertical = 2·atan(tan 30° · 720/1280) ≈ 36.0°.
-    let vfov = 2.0 * cam.tan_half_fov.atan().to_degrees();
+    assert_eq!(cam.fov_axis, FovAxis::X);
+    let vfov = 2.0 * cam.tan_half_vfov().atan().to_degrees();
     assert!((vfov - 35.98).abs() < 0.02, "{vfov}");
+    // The floor's specular reflectance is a checkerboard of 0.8 (at uv 0) and 0.2, 20 × 80
+    // periods over the uv square.
+    let floor = d.materials.iter().find(|m| m.name == "Floor").unwrap();
+    match &floor.kind {
+        MaterialKind::Conductor { specular_tint: ColorParam::Checkerboard { color0, color1, to_uv }, .. } => {
+            assert_eq!((*color0, *color1), (Vec3::splat(0.8), Vec3::splat(0.2)));
+            assert_eq!(to_uv.transform_point2(Vec2::new(1.0, 1.0)), Vec2::new(20.0, 80.0));
+            assert_eq!(to_uv.transform_point2(Vec2::ZERO), Vec2::ZERO);
+        }
+        other => panic!("Floor is {other:?}"),
+    }
     // maxDepth 13 = 12 scattering events; 64 samples from the sampler.
     assert_eq!(d.settings.max_bounces, 12);
     assert_eq!(d.settings.spp, 64);
@@ -150,4 +166,230 @@ fn defaults_refs_primitives_and_emitters() {
 
     let e = load_err("nodefault", "<scene version=\"0.5.0\">\n<bsdf type=\"diffuse\" id=\"d\"><float name=\"reflectance\" value=\"$missing\"/></bsdf>\n</scene>");
     assert!(e.contains("line 2") && e.contains("$missing"), "{e}");
+}
+
+// ---------------------------------------------------------------- camera: fov axis and --size
+
+/// The test scene (scenes/veach-ajar/scene.xml) with its asset paths made absolute and its film
+/// set to `w` × `h`.
+fn veach_test_scene(w: u32, h: u32) -> String {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/veach-ajar/scene.xml");
+    let xml = std::fs::read_to_string(&p).unwrap().replace("../assets/veach-ajar", "ASSETS");
+    let (w0, h0) = (r#"<default name="width" value="176" />"#, r#"<default name="height" value="128" />"#);
+    assert!(xml.contains(w0) && xml.contains(h0), "the test scene's film defaults changed");
+    xml.replace(w0, &format!(r#"<default name="width" value="{w}" />"#)).replace(h0, &format!(r#"<default name="height" value="{h}" />"#))
+}
+
+#[test]
+fn a_new_image_size_keeps_the_mitsuba_view() {
+    // What `pixguide render scenes/veach-ajar/scene.xml --size 320x180` does (src/cli/render.rs
+    // sets the camera's width and height) against the same XML with a 320×180 film.
+    let mut resized = load_xml("size-176", &veach_test_scene(176, 128)).unwrap_or_else(|e| panic!("{e}")).camera;
+    resized.width = 320;
+    resized.height = 180;
+    let direct = load_xml("size-320", &veach_test_scene(320, 180)).unwrap_or_else(|e| panic!("{e}")).camera;
+    assert_eq!((direct.width, direct.height), (320, 180));
+    for y in [0.0, 0.5, 37.25, 90.0, 179.5, 180.0] {
+        for x in [0.0, 0.5, 101.75, 160.0, 319.5, 320.0] {
+            let f = Vec2::new(x, y);
+            assert_eq!(resized.ray(f).dir, direct.ray(f).dir, "ray through pixel position {f}");
+            assert_eq!(resized.ray(f).origin, direct.ray(f).origin);
+        }
+    }
+    // Both keep the declared 60° across the image (Mitsuba's default fov axis is x).
+    let t = 30f32.to_radians().tan();
+    for cam in [&resized, &direct] {
+        let e = cam.tan_half_extent();
+        assert!((e.x - t).abs() < 1e-6 && (e.y - t * 180.0 / 320.0).abs() < 1e-6, "{e}");
+    }
+}
+
+#[test]
+fn each_fov_axis_gives_its_half_angle_tangent() {
+    // A 64 × 32 film with fov 45°: t = tan 22.5° along the named extent.
+    let t = 22.5f32.to_radians().tan();
+    let diag = (64f32 * 64.0 + 32.0 * 32.0).sqrt();
+    let cases = [
+        ("x", FovAxis::X, Vec2::new(t, t / 2.0)),
+        ("y", FovAxis::Y, Vec2::new(2.0 * t, t)),
+        ("diagonal", FovAxis::Diagonal, Vec2::new(t * 64.0 / diag, t * 32.0 / diag)),
+        // The film is wider than high: its smaller extent is the height.
+        ("smaller", FovAxis::Smaller, Vec2::new(2.0 * t, t)),
+        ("larger", FovAxis::Larger, Vec2::new(t, t / 2.0)),
+    ];
+    for (spelling, tag) in [("fovAxis", "0.5.0"), ("fov_axis", "3.0.0")] {
+        for (name, axis, want) in cases {
+            let xml = format!(
+                r#"<scene version="{tag}"><sensor type="perspective"><float name="fov" value="45"/><string name="{spelling}" value="{name}"/>
+  <transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+  <film type="hdrfilm"><integer name="width" value="64"/><integer name="height" value="32"/></film></sensor>
+  <shape type="cube"/></scene>"#
+            );
+            let cam = load_xml(&format!("axis-{name}-{spelling}"), &xml).unwrap_or_else(|e| panic!("{e}")).camera;
+            assert_eq!(cam.fov_axis, axis);
+            let got = cam.tan_half_extent();
+            assert!((got - want).abs().max_element() < 1e-6, "{spelling}={name}: {got} vs {want}");
+            // The ray to the middle of the right edge and of the top edge.
+            let d = cam.ray(Vec2::new(64.0, 16.0)).dir;
+            assert!((d.dot(cam.right) / d.dot(cam.forward) - want.x).abs() < 1e-5, "{name}: right edge");
+            let d = cam.ray(Vec2::new(32.0, 0.0)).dir;
+            assert!((d.dot(cam.up) / d.dot(cam.forward) - want.y).abs() < 1e-5, "{name}: top edge");
+        }
+    }
+    let e = load_err("axis-bad", "<scene version=\"0.5.0\">\n<sensor type=\"perspective\"><float name=\"fov\" value=\"45\"/>\n<string name=\"fovAxis\" value=\"z\"/></sensor>\n</scene>");
+    assert!(e.contains("line 3") && e.contains("\"z\"") && e.contains("fov axis"), "{e}");
+}
+
+#[test]
+fn mitsuba3_parameter_names_are_read() {
+    let xml = r#"<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="4"/></integrator>
+  <sensor type="perspective"><float name="fov" value="30"/><string name="fov_axis" value="Y"/><float name="near_clip" value="0.1"/>
+    <transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <sampler type="independent"><integer name="sample_count" value="12"/></sampler>
+    <film type="hdrfilm"><integer name="width" value="40"/><integer name="height" value="20"/></film></sensor>
+  <bsdf type="roughconductor" id="m"><float name="alpha_u" value="0.2"/><float name="alpha_v" value="0.2"/>
+    <texture type="checkerboard" name="specular_reflectance"><transform name="to_uv"><scale value="3"/></transform></texture></bsdf>
+  <shape type="rectangle"><ref id="m"/></shape>
+</scene>"#;
+    let d = load_xml("mitsuba3", xml).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((d.settings.max_bounces, d.settings.spp), (3, 12));
+    assert_eq!(d.camera.fov_axis, FovAxis::Y);
+    match &d.materials[0].kind {
+        MaterialKind::Conductor { roughness, specular_tint: ColorParam::Checkerboard { color0, color1, to_uv }, .. } => {
+            assert!((roughness - 0.2).abs() < 1e-6);
+            // Mitsuba's defaults 0.4 and 0.2.
+            assert_eq!((*color0, *color1), (Vec3::splat(0.4), Vec3::splat(0.2)));
+            assert_eq!(to_uv.transform_point2(Vec2::new(1.0, 0.5)), Vec2::new(3.0, 1.5));
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+// ---------------------------------------------------------------- textures
+
+#[test]
+fn checkerboard_is_color0_at_the_uv_origin_and_alternates_each_half_period() {
+    let (c0, c1) = (Vec3::new(0.8, 0.7, 0.6), Vec3::new(0.1, 0.2, 0.3));
+    let board = ColorParam::Checkerboard { color0: c0, color1: c1, to_uv: glam::Affine2::IDENTITY };
+    for (uv, want) in [
+        ((0.0, 0.0), c0),
+        ((0.1, 0.1), c0),
+        ((0.6, 0.1), c1),
+        ((0.1, 0.6), c1),
+        ((0.6, 0.6), c0),
+        // ½ belongs to the lower half (Mitsuba 3 tests frac > ½).
+        ((0.5, 0.5), c0),
+        ((0.5, 0.51), c1),
+        // Period 1, and negative coordinates continue the pattern (frac(−0.4) = 0.6).
+        ((1.1, 2.2), c0),
+        ((-0.4, 0.1), c1),
+        ((-0.4, -0.4), c0),
+    ] {
+        assert_eq!(board.eval(Vec2::new(uv.0, uv.1), &[]), want, "uv {uv:?}");
+    }
+
+    // From XML: Mitsuba 0.6's uscale/vscale/uoffset/voffset (uv · scale + offset) and Mitsuba 3's
+    // to_uv; here both map uv to (4u + 0.25, 2v).
+    let old = r#"<texture type="checkerboard" name="reflectance"><rgb name="color0" value="0.8, 0.7, 0.6"/><rgb name="color1" value="0.1, 0.2, 0.3"/>
+        <float name="uscale" value="4"/><float name="vscale" value="2"/><float name="uoffset" value="0.25"/></texture>"#;
+    let new = r#"<texture type="checkerboard" name="reflectance"><rgb name="color0" value="0.8, 0.7, 0.6"/><rgb name="color1" value="0.1, 0.2, 0.3"/>
+        <transform name="to_uv"><scale x="4" y="2"/><translate x="0.25"/></transform></texture>"#;
+    for (label, tex) in [("old", old), ("new", new)] {
+        let xml = format!(r#"<scene version="0.5.0">{CAMERA}<bsdf type="diffuse" id="d">{tex}</bsdf><shape type="rectangle"><ref id="d"/></shape></scene>"#);
+        let d = load_xml(&format!("checker-{label}"), &xml).unwrap_or_else(|e| panic!("{e}"));
+        let albedo = match &d.materials[0].kind {
+            MaterialKind::Lambert { albedo } => albedo.clone(),
+            other => panic!("{other:?}"),
+        };
+        // (u, v) → (4u + 0.25, 2v): u = 0.05 → 0.45 (lower half), u = 0.1 → 0.65 (upper half).
+        assert_eq!(albedo.eval(Vec2::new(0.05, 0.1), &[]), c0, "{label}");
+        assert_eq!(albedo.eval(Vec2::new(0.1, 0.1), &[]), c1, "{label}");
+        assert_eq!(albedo.eval(Vec2::new(0.1, 0.3), &[]), c0, "{label}");
+        // Mitsuba's rectangle puts uv (0, 0) at its (−1, −1) corner.
+        let corner = d.mesh.positions.iter().position(|p| (p.x + 1.0).abs() < 1e-6 && (p.y + 1.0).abs() < 1e-6).unwrap();
+        assert_eq!(d.mesh.uvs[corner], Vec2::ZERO);
+    }
+}
+
+/// A white furnace: a unit sphere filling the view inside a constant environment of radiance 1,
+/// made of a conductor with η = 1, k = 20 (Fresnel reflectance 0.990) and the given specular
+/// reflectance element(s); 4 spp at 24 × 24.
+fn furnace(name: &str, bsdf: &str, reflectance: &str) -> renderer::film::Frame {
+    let xml = format!(
+        r#"<scene version="0.5.0">
+  <sensor type="perspective"><float name="fov" value="20"/>
+    <transform name="toWorld"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="24"/><integer name="height" value="24"/></film></sensor>
+  <bsdf type="{bsdf}" id="metal"><string name="material" value="none"/><float name="alpha" value="0.3"/>{reflectance}</bsdf>
+  <shape type="sphere"><float name="radius" value="1"/><ref id="metal"/></shape>
+  <emitter type="constant"><rgb name="radiance" value="1"/></emitter>
+</scene>"#
+    );
+    let d = load_xml(name, &xml).unwrap_or_else(|e| panic!("{e}"));
+    let scene = Scene::new(name, d).unwrap();
+    common::render(&scene, 4, 7, 5, BufferRequest::RADIANCE_ONLY)
+}
+
+#[test]
+fn conductor_with_a_constant_texture_renders_like_the_same_rgb() {
+    let dir = std::env::temp_dir().join(format!("pixguide-mitsuba-{}-const-exr", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let exr = dir.join("tint.exr");
+    let c = [0.9f32, 0.6, 0.3];
+    image::DynamicImage::ImageRgb32F(image::Rgb32FImage::from_pixel(2, 2, image::Rgb(c))).save(&exr).unwrap();
+    let rgb = r#"<rgb name="specularReflectance" value="0.9, 0.6, 0.3"/>"#.to_string();
+    let checker = r#"<texture type="checkerboard" name="specular_reflectance"><rgb name="color0" value="0.9, 0.6, 0.3"/><rgb name="color1" value="0.9 0.6 0.3"/><float name="uscale" value="7"/></texture>"#.to_string();
+    let bitmap = format!(r#"<texture type="bitmap" name="specular_reflectance"><string name="filename" value="{}"/></texture>"#, exr.display());
+    for bsdf in ["conductor", "roughconductor"] {
+        let want = furnace(&format!("furnace-{bsdf}-rgb"), bsdf, &rgb);
+        for (label, tex) in [("checkerboard", &checker), ("bitmap", &bitmap)] {
+            let got = furnace(&format!("furnace-{bsdf}-{label}"), bsdf, tex);
+            assert!(got.radiance.mean == want.radiance.mean, "{bsdf} with a constant {label} renders differently from the RGB");
+        }
+        if bsdf == "conductor" {
+            // Smooth: each central pixel (within 5° of the axis, incidence below 30°) sees the
+            // environment once through the sphere, F · tint.
+            let f = 400.0 / 404.0;
+            let central = want.radiance.mean.chunks(3).enumerate().filter(|(i, _)| (6..18).contains(&(i % 24)) && (6..18).contains(&(i / 24)));
+            for (_, px) in central {
+                for k in 0..3 {
+                    assert!((px[k] - f * c[k]).abs() < 2e-3, "pixel {px:?} vs {:?}", c.map(|x| x * f));
+                }
+            }
+        }
+    }
+    // And a real checkerboard is not a constant: the two colours both appear.
+    let board = r#"<texture type="checkerboard" name="specular_reflectance"><rgb name="color0" value="0.9"/><rgb name="color1" value="0.1"/><float name="uscale" value="8"/><float name="vscale" value="8"/></texture>"#;
+    let f = furnace("furnace-board", "conductor", board);
+    let lum: Vec<f32> = f.radiance.mean.chunks(3).map(|p| p[0]).collect();
+    assert!(lum.iter().any(|&l| l > 0.8) && lum.iter().any(|&l| l < 0.2), "{lum:?}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn bad_texture_references_name_the_file_and_field() {
+    let metal = |tex: &str| format!("<scene version=\"0.5.0\">\n<bsdf type=\"roughconductor\" id=\"m\">\n{tex}\n</bsdf>\n</scene>");
+    // A missing image: the scene file, the texture's line, the BSDF parameter and the image path.
+    let e = load_err("tex-missing", &metal(r#"<texture type="bitmap" name="specular_reflectance"><string name="filename" value="no-such-image.png"/></texture>"#));
+    assert!(e.contains("scene.xml") && e.contains("line 3") && e.contains("specular_reflectance") && e.contains("no-such-image.png"), "{e}");
+    // An unknown texture type.
+    let e = load_err("tex-type", &metal(r#"<texture type="gradient" name="specularReflectance"/>"#));
+    assert!(e.contains("scene.xml") && e.contains("line 3") && e.contains("specularReflectance") && e.contains("\"gradient\""), "{e}");
+    // A reference to a texture that is not defined.
+    let e = load_err("tex-ref", &metal(r#"<ref name="specular_reflectance" id="wood"/>"#));
+    assert!(e.contains("line 3") && e.contains("specular_reflectance") && e.contains("wood"), "{e}");
+    // A bitmap without a file name, an unknown checkerboard parameter, a textured colour.
+    let e = load_err("tex-nofile", &metal(r#"<texture type="bitmap" name="specular_reflectance"/>"#));
+    assert!(e.contains("line 3") && e.contains("specular_reflectance") && e.contains("filename"), "{e}");
+    let e = load_err("tex-param", &metal("<texture type=\"checkerboard\" name=\"specular_reflectance\">\n<float name=\"blur\" value=\"1\"/></texture>"));
+    assert!(e.contains("line 4") && e.contains("blur") && e.contains("specular_reflectance"), "{e}");
+    let e = load_err("tex-nested", &metal(r#"<texture type="checkerboard" name="specular_reflectance"><texture type="bitmap" name="color0"/></texture>"#));
+    assert!(e.contains("color0") && e.contains("constant colour"), "{e}");
+    // The same missing image as a top-level texture referenced by a diffuse BSDF.
+    let e = load_err(
+        "tex-ref-missing",
+        "<scene version=\"0.5.0\">\n<texture type=\"bitmap\" id=\"wood\"><string name=\"filename\" value=\"gone.jpg\"/></texture>\n<bsdf type=\"diffuse\" id=\"d\"><ref name=\"reflectance\" id=\"wood\"/></bsdf>\n</scene>",
+    );
+    assert!(e.contains("line 2") && e.contains("reflectance") && e.contains("gone.jpg"), "{e}");
 }

@@ -256,7 +256,7 @@ fn textured_material_reads_the_texture_in_linear_colour() {
     assert!((t.texel(1, 0) - expect([200, 150, 0])).length() < 1e-6);
     assert!((t.texel(0, 1) - expect([20, 0, 90])).length() < 1e-6);
     let m = &d.materials[d.mesh.material[0] as usize];
-    assert!(matches!(m.kind, MaterialKind::Lambert { albedo: ColorParam::Texture { index: 0, scale } } if scale == Vec3::new(0.5, 1.0, 1.0)));
+    assert!(matches!(m.kind, MaterialKind::Lambert { albedo: ColorParam::Texture { index: 0, scale, .. } } if scale == Vec3::new(0.5, 1.0, 1.0)));
     // At the centre of the top-left texel the BSDF sees that texel times the albedo scale.
     match m.bsdf(Vec2::new(0.25, 0.25), &d.textures) {
         Bsdf::Lambert { albedo } => assert!((albedo - expect([200, 100, 0]) * Vec3::new(0.5, 1.0, 1.0)).length() < 1e-6),
@@ -326,7 +326,7 @@ fn conductor_presets_and_defaults() {
     assert!(!d.settings.russian_roulette);
     let get = |n: &str| d.materials.iter().find(|m| m.name == n).unwrap().kind.clone();
     match get("au") {
-        MaterialKind::Conductor { eta, k, roughness, specular_tint } => {
+        MaterialKind::Conductor { eta, k, roughness, specular_tint: ColorParam::Const(specular_tint) } => {
             // Gold reflects red more than blue: its k falls from red to blue.
             assert!(k.x > k.z && eta.z > eta.x);
             assert_eq!((roughness, specular_tint), (0.2, Vec3::ONE));
@@ -432,7 +432,7 @@ fn check_gltf_quad_scene(d: &SceneDescription, offset: Vec3) {
     let lamp = by_name("lamp");
     assert!((lamp.emission - Vec3::new(4.0, 2.0, 1.0)).length() < 1e-6);
     assert!(lamp.two_sided_emission);
-    assert!(matches!(lamp.kind, MaterialKind::Conductor { roughness, specular_tint, .. } if (roughness - 0.25).abs() < 1e-6 && (specular_tint - Vec3::new(0.9, 0.8, 0.1)).length() < 1e-6));
+    assert!(matches!(lamp.kind, MaterialKind::Conductor { roughness, specular_tint: ColorParam::Const(specular_tint), .. } if (roughness - 0.25).abs() < 1e-6 && (specular_tint - Vec3::new(0.9, 0.8, 0.1)).length() < 1e-6));
     assert!(matches!(by_name("glass").kind, MaterialKind::Dielectric { ior, .. } if ior == 1.5));
     // The base colour texture (a 1×1 green PNG) decoded to linear.
     assert_eq!(d.textures.len(), 1);

@@ -25,7 +25,9 @@ pub struct RenderArgs {
     /// Maximum bounces (default: the scene's, normally 5).
     #[arg(long)]
     pub max_bounces: Option<u32>,
-    /// Image size WxH instead of the scene's (e.g. the size of a --reference).
+    /// Image size WxH instead of the scene's (e.g. the size of a --reference). The view keeps
+    /// the scene's field of view along its axis (vertical for TOML and glTF, Mitsuba's fov_axis,
+    /// horizontal by default, for XML), so a wider image shows more at the sides.
     #[arg(long, value_parser = crate::cli::dataset::parse_size)]
     pub size: Option<(u32, u32)>,
     /// Output EXR (radiance with variance; with --aovs every buffer).
@@ -110,6 +112,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     }
     let mut scene = Scene::load(&a.scene)?;
     if let Some((w, h)) = a.size {
+        // The camera derives its angles from its fov axis and the image size (Camera::ray).
         scene.camera.width = w;
         scene.camera.height = h;
     }

@@ -195,12 +195,12 @@ impl Ctx {
             None => None,
         };
         let albedo = match base_tex {
-            Some(index) => ColorParam::Texture { index, scale: base },
+            Some(index) => ColorParam::texture(index, base),
             None => ColorParam::Const(base),
         };
         let mean_base = base * base_tex.map_or(Vec3::ONE, |t| b.textures[t as usize].mean());
         let kind = if metallic >= 0.5 {
-            MaterialKind::Conductor { eta: Vec3::ONE, k: Vec3::splat(20.0), roughness: alpha, specular_tint: mean_base }
+            MaterialKind::Conductor { eta: Vec3::ONE, k: Vec3::splat(20.0), roughness: alpha, specular_tint: ColorParam::Const(mean_base) }
         } else if transmission >= 0.5 {
             MaterialKind::Dielectric { ior, roughness: alpha, tint: mean_base }
         } else if roughness < 0.9 {

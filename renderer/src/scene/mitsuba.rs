@@ -5,24 +5,25 @@
 //! Everything the loader does not understand is an error naming the file, the line and the
 //! element (`scene.xml: line 12 <bsdf type="hair">: unsupported BSDF type`), never a silent
 //! default: a scene that renders differently from what its author made would poison a test.
-//! The few things that are read but approximated (a textured specular reflectance becomes its
-//! mean, a one-sided diffuse becomes two-sided) print a warning.
+//! The few things that are read but approximated (a textured dielectric or plastic specular
+//! reflectance becomes its mean, a one-sided diffuse becomes two-sided) print a warning.
+//! Texture lookups (`bitmap`, `checkerboard`) follow Mitsuba 3, which agrees with 0.6 on uv ≥ 0.
 
 use super::builder::{check_resolution, warn, Builder};
 use super::obj::MaterialChoice;
 use super::primitives::{self, TriMesh};
 use super::toml_format::CONDUCTOR_PRESETS;
 use super::{obj, ColorParam, Material, MaterialKind, RenderSettings, SceneDescription};
-use crate::camera::Camera;
+use crate::camera::{Camera, FovAxis};
 use crate::light::Environment;
 use crate::texture::srgb_to_linear;
 use crate::{Error, Result};
-use glam::{Mat3, Mat4, Vec3};
+use glam::{Affine2, Mat3, Mat4, Vec2, Vec3};
 use roxmltree::{Document, Node};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-/// Mitsuba's default film size (768 × 576) and field of view axis ("x").
+/// Mitsuba's default film size (768 × 576).
 const DEFAULT_FILM: (u32, u32) = (768, 576);
 
 /// Named dielectrics of Mitsuba's IOR table (the ones scenes use), at 589 nm.
@@ -82,10 +83,17 @@ struct BsdfDef {
     kind: MaterialKind,
 }
 
-/// A colour parameter: a constant or a texture node (resolved when the material is built).
+/// A colour parameter: a constant or a texture node (resolved when the material is built),
+/// with the name of the BSDF parameter that holds it (errors name it).
 enum Spectrum<'a, 'i> {
     Const(Vec3),
-    Texture(Node<'a, 'i>),
+    Texture { node: Node<'a, 'i>, param: String },
+}
+
+/// A texture as read from the XML, before its image is loaded.
+enum TextureDef {
+    Bitmap { file: PathBuf, to_uv: Affine2 },
+    Checkerboard { color0: Vec3, color1: Vec3, to_uv: Affine2 },
 }
 
 struct Loader<'a, 'i> {
@@ -341,7 +349,7 @@ impl<'a, 'i> Loader<'a, 'i> {
             return Err(self.err(n, format!("unsupported integrator \"{t}\" (path tracers only)")));
         }
         for c in Self::elements(n) {
-            if c.attribute("name") == Some("maxDepth") {
+            if matches!(c.attribute("name"), Some("maxDepth" | "max_depth")) {
                 // Mitsuba's maxDepth counts path segments (2 = direct light only, one scattering
                 // event); −1 means unlimited, for which our default stands.
                 let d = self.integer(c)?;
@@ -360,19 +368,22 @@ impl<'a, 'i> Loader<'a, 'i> {
         if t != "perspective" {
             return Err(self.err(n, format!("unsupported sensor type \"{t}\" (only perspective)")));
         }
-        let (mut fov, mut axis, mut to_world) = (None, "x".to_string(), Mat4::IDENTITY);
+        let (mut fov, mut axis, mut to_world) = (None, FovAxis::X, Mat4::IDENTITY);
         let (mut w, mut h) = DEFAULT_FILM;
         for c in Self::elements(n) {
             let name = c.attribute("name").unwrap_or("");
             match (c.tag_name().name(), name) {
                 ("float", "fov") => fov = Some(self.float(c)?),
-                ("string", "fovAxis") => axis = self.required(c, "value")?,
+                ("string", "fovAxis" | "fov_axis") => {
+                    let v = self.required(c, "value")?;
+                    axis = FovAxis::parse(&v).ok_or_else(|| self.err(c, format!("unknown fov axis \"{v}\" (x, y, diagonal, smaller, larger)")))?;
+                }
                 ("transform", "toWorld" | "to_world") => to_world = self.transform(c)?,
                 // Clip planes and focus distance change nothing for a pinhole camera without clipping.
-                ("float", "nearClip" | "farClip" | "focusDistance" | "shutterOpen" | "shutterClose") => {}
+                ("float", "nearClip" | "farClip" | "focusDistance" | "shutterOpen" | "shutterClose" | "near_clip" | "far_clip" | "focus_distance" | "shutter_open" | "shutter_close") => {}
                 ("sampler", _) => {
                     for s in Self::elements(c) {
-                        if s.attribute("name") == Some("sampleCount") {
+                        if matches!(s.attribute("name"), Some("sampleCount" | "sample_count")) {
                             let spp = self.integer(s)?;
                             if spp < 1 || spp > u32::MAX as i64 {
                                 return Err(self.err(s, format!("sampleCount {spp} must be at least 1")));
@@ -386,7 +397,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                         match (s.tag_name().name(), s.attribute("name").unwrap_or("")) {
                             ("integer", "width") => w = self.dim(s)?,
                             ("integer", "height") => h = self.dim(s)?,
-                            ("integer", "cropOffsetX" | "cropOffsetY" | "cropWidth" | "cropHeight") => {
+                            ("integer", "cropOffsetX" | "cropOffsetY" | "cropWidth" | "cropHeight" | "crop_offset_x" | "crop_offset_y" | "crop_width" | "crop_height") => {
                                 return Err(self.err(s, "film crop windows are not supported"));
                             }
                             // Output format, tone mapping and the reconstruction filter: how
@@ -403,17 +414,6 @@ impl<'a, 'i> Loader<'a, 'i> {
         if !(fov > 0.0 && fov < 180.0) {
             return Err(self.err(n, format!("fov {fov} is outside (0, 180) degrees")));
         }
-        let (wf, hf) = (w as f32, h as f32);
-        // tan(vertical/2) = tan(fov/2) · (height / length of the side the fov spans).
-        let span = match axis.as_str() {
-            "x" => wf,
-            "y" => hf,
-            "diagonal" => (wf * wf + hf * hf).sqrt(),
-            "smaller" => wf.min(hf),
-            "larger" => wf.max(hf),
-            other => return Err(self.err(n, format!("unknown fovAxis \"{other}\" (x, y, diagonal, smaller, larger)"))),
-        };
-        let vfov = 2.0 * ((fov.to_radians() * 0.5).tan() * hf / span).atan().to_degrees();
         // Mitsuba cameras look along +Z with +Y up; +X is the image's left.
         let position = to_world.transform_point3(Vec3::ZERO);
         let forward = to_world.transform_vector3(Vec3::Z).normalize_or_zero();
@@ -422,7 +422,9 @@ impl<'a, 'i> Loader<'a, 'i> {
         if left.dot(up.cross(forward)) < 0.0 {
             self.warn(n, "the camera transform mirrors the image; rendering it unmirrored");
         }
-        Camera::look_at(position, position + forward, up, vfov, w, h).ok_or_else(|| self.err(n, "degenerate camera transform (zero or parallel view and up)"))
+        // The camera keeps the axis, so that a new image size (`--size`) keeps the angle along
+        // it, as Mitsuba does when the film alone changes.
+        Camera::look_at_axis(position, position + forward, up, fov, axis, w, h).ok_or_else(|| self.err(n, "degenerate camera transform (zero or parallel view and up)"))
     }
 
     fn dim(&self, n: Node<'a, 'i>) -> Result<u32> {
@@ -432,92 +434,142 @@ impl<'a, 'i> Loader<'a, 'i> {
 
     /// A colour parameter: constant, an inline texture, or a `<ref>` to a texture.
     fn spectrum(&self, n: Node<'a, 'i>) -> Result<Spectrum<'a, 'i>> {
+        let param = n.attribute("name").unwrap_or("(unnamed)").to_string();
         match n.tag_name().name() {
             "rgb" | "srgb" | "spectrum" => Ok(Spectrum::Const(self.color(n)?)),
             "float" => Ok(Spectrum::Const(Vec3::splat(self.float(n)?.max(0.0)))),
-            "texture" => Ok(Spectrum::Texture(n)),
+            "texture" => Ok(Spectrum::Texture { node: n, param }),
             "ref" => {
                 let id = self.required(n, "id")?;
-                self.textures.get(&id).map(|&t| Spectrum::Texture(t)).ok_or_else(|| self.err(n, format!("no <texture id=\"{id}\"> defined before this")))
+                let node = *self.textures.get(&id).ok_or_else(|| self.err(n, format!("no <texture id=\"{id}\"> defined before this")))?;
+                Ok(Spectrum::Texture { node, param })
             }
             other => Err(self.err(n, format!("<{other}> is not a colour"))),
         }
     }
 
-    /// A texture as an albedo: bitmaps load as images; other textures become their mean colour.
-    fn albedo(&mut self, s: Spectrum<'a, 'i>) -> Result<ColorParam> {
+    /// Where a texture is in the file and which BSDF parameter uses it, for errors:
+    /// `line 79 <texture type="bitmap"> (specularReflectance)`.
+    fn texture_field(&self, t: Node<'a, 'i>, param: &str) -> String {
+        format!("{} ({param})", self.describe(t))
+    }
+
+    /// Reads a `bitmap` or `checkerboard` texture. Texture coordinates are mapped by Mitsuba
+    /// 3's `to_uv` transform or Mitsuba 0.6's `uscale`/`vscale`/`uoffset`/`voffset`
+    /// (uv · scale + offset).
+    fn texture_def(&self, t: Node<'a, 'i>, param: &str) -> Result<TextureDef> {
+        let field = self.texture_field(t, param);
+        let fail = |n: Node<'a, 'i>, msg: String| {
+            let at = if n == t { field.clone() } else { format!("{} in {field}", self.describe(n)) };
+            Error::scene(&self.file, at, msg)
+        };
+        let ty = self.attr(t, "type")?.ok_or_else(|| fail(t, "missing attribute `type`".into()))?;
+        if !matches!(ty.as_str(), "bitmap" | "checkerboard") {
+            return Err(fail(t, format!("unsupported texture type \"{ty}\" (bitmap, checkerboard)")));
+        }
+        let (mut scale, mut offset, mut to_uv, mut old_style) = (Vec2::ONE, Vec2::ZERO, None, false);
+        let (mut file, mut color0, mut color1) = (None, Vec3::splat(0.4), Vec3::splat(0.2));
+        for c in Self::elements(t) {
+            let name = c.attribute("name").unwrap_or("");
+            match (ty.as_str(), c.tag_name().name(), name) {
+                (_, "float", "uscale" | "vscale" | "uoffset" | "voffset") => {
+                    let v = self.float(c)?;
+                    old_style = true;
+                    match name {
+                        "uscale" => scale.x = v,
+                        "vscale" => scale.y = v,
+                        "uoffset" => offset.x = v,
+                        _ => offset.y = v,
+                    }
+                }
+                (_, "transform", "to_uv" | "toUV") => {
+                    // The 2-D affine part: x and y rows, x and y columns and the translation.
+                    let m = self.transform(c)?;
+                    to_uv = Some(Affine2::from_cols(m.x_axis.truncate().truncate(), m.y_axis.truncate().truncate(), m.w_axis.truncate().truncate()));
+                }
+                ("bitmap", "string", "filename") => file = Some(self.required(c, "value")?),
+                // Filtering: ours is bilinear (no MIP maps).
+                ("bitmap", "string", "filterType" | "filter_type") | ("bitmap", "float", "maxAnisotropy") | ("bitmap", "boolean", "cache") => {}
+                ("bitmap", "string", "wrapMode" | "wrapModeU" | "wrapModeV" | "wrap_mode") => {
+                    let v = self.required(c, "value")?;
+                    if v != "repeat" {
+                        self.warn(c, format!("{param}: wrap mode \"{v}\" becomes repeat"));
+                    }
+                }
+                ("bitmap", "float", "gamma") => {
+                    let g = self.float(c)?;
+                    if g != -1.0 && (g - 2.2).abs() > 1e-3 {
+                        return Err(fail(c, format!("gamma {g} is not supported (8-bit images are read as sRGB, float images as linear)")));
+                    }
+                }
+                ("bitmap", "boolean", "raw") => {
+                    if self.boolean(c)? {
+                        return Err(fail(c, "raw=true is not supported (8-bit images are always read as sRGB)".into()));
+                    }
+                }
+                ("checkerboard", _, "color0" | "color1") => {
+                    let v = match c.tag_name().name() {
+                        "float" => Vec3::splat(self.float(c)?.max(0.0)),
+                        "rgb" | "srgb" | "spectrum" => self.color(c)?,
+                        other => return Err(fail(c, format!("{name} must be a constant colour, not <{other}>"))),
+                    };
+                    if name == "color0" {
+                        color0 = v
+                    } else {
+                        color1 = v
+                    }
+                }
+                _ => return Err(fail(c, format!("unsupported {ty} parameter"))),
+            }
+        }
+        let to_uv = match (to_uv, old_style) {
+            (Some(_), true) => return Err(fail(t, "give either to_uv or uscale/vscale/uoffset/voffset, not both".into())),
+            (Some(m), false) => m,
+            (None, _) => Affine2::from_scale_angle_translation(scale, 0.0, offset),
+        };
+        if !to_uv.is_finite() {
+            return Err(fail(t, "the texture coordinate transform is not finite".into()));
+        }
+        Ok(match ty.as_str() {
+            "bitmap" => {
+                let file = file.ok_or_else(|| fail(t, "a bitmap needs <string name=\"filename\">".into()))?;
+                TextureDef::Bitmap { file: self.dir.join(file), to_uv }
+            }
+            _ => TextureDef::Checkerboard { color0, color1, to_uv },
+        })
+    }
+
+    /// A colour parameter that may vary over the surface (diffuse reflectance, a conductor's
+    /// specular reflectance): constants and checkerboards as they are, bitmaps loaded as
+    /// textures, all values capped at 1 (a reflectance).
+    fn color_param(&mut self, s: Spectrum<'a, 'i>) -> Result<ColorParam> {
         match s {
             Spectrum::Const(c) => Ok(ColorParam::Const(c.min(Vec3::ONE))),
-            Spectrum::Texture(t) => {
-                let ty = self.required(t, "type")?;
-                if ty != "bitmap" {
-                    let mean = self.texture_mean(t)?;
-                    self.warn(t, format!("a \"{ty}\" texture becomes its mean colour {mean}"));
-                    return Ok(ColorParam::Const(mean.min(Vec3::ONE)));
+            Spectrum::Texture { node, param } => match self.texture_def(node, &param)? {
+                TextureDef::Bitmap { file, to_uv } => {
+                    let field = self.texture_field(node, &param);
+                    let index = self.b.albedo_texture(&file, &field)?;
+                    Ok(ColorParam::Texture { index, scale: Vec3::ONE, to_uv })
                 }
-                let mut file = None;
-                for c in Self::elements(t) {
-                    match (c.tag_name().name(), c.attribute("name").unwrap_or("")) {
-                        ("string", "filename") => file = Some(self.required(c, "value")?),
-                        // Filtering and wrapping: ours is bilinear and repeating.
-                        ("string", "filterType" | "wrapMode" | "wrapModeU" | "wrapModeV" | "filter_type" | "wrap_mode") => {}
-                        ("float", "maxAnisotropy") | ("boolean", "cache") => {}
-                        ("float", "gamma") => {
-                            let g = self.float(c)?;
-                            if g != -1.0 && (g - 2.2).abs() > 1e-3 {
-                                return Err(self.err(c, format!("gamma {g} is not supported (images are read as sRGB)")));
-                            }
-                        }
-                        ("float", "uscale" | "vscale" | "uoffset" | "voffset") => {
-                            let (v, name) = (self.float(c)?, c.attribute("name").unwrap());
-                            let identity = if name.ends_with("scale") { 1.0 } else { 0.0 };
-                            if v != identity {
-                                return Err(self.err(c, format!("texture coordinate {name} {v} is not supported")));
-                            }
-                        }
-                        _ => return Err(self.err(c, "unsupported bitmap parameter")),
-                    }
+                TextureDef::Checkerboard { color0, color1, to_uv } => {
+                    Ok(ColorParam::Checkerboard { color0: color0.min(Vec3::ONE), color1: color1.min(Vec3::ONE), to_uv })
                 }
-                let file = file.ok_or_else(|| self.err(t, "a bitmap needs <string name=\"filename\">"))?;
-                let field = self.describe(t);
-                Ok(ColorParam::Texture { index: self.b.albedo_texture(&self.dir.join(&file), &field)?, scale: Vec3::ONE })
-            }
+            },
         }
     }
 
-    /// Mean colour of a procedural texture (checkerboard: the mean of its two colours).
-    fn texture_mean(&self, t: Node<'a, 'i>) -> Result<Vec3> {
-        let ty = self.required(t, "type")?;
-        match ty.as_str() {
-            "checkerboard" => {
-                let (mut c0, mut c1) = (Vec3::splat(0.4), Vec3::splat(0.2));
-                for c in Self::elements(t) {
-                    match (c.tag_name().name(), c.attribute("name").unwrap_or("")) {
-                        (_, "color0") => c0 = self.color(c)?,
-                        (_, "color1") => c1 = self.color(c)?,
-                        ("float", "uscale" | "vscale" | "uoffset" | "voffset") => {}
-                        _ => return Err(self.err(c, "unsupported checkerboard parameter")),
-                    }
-                }
-                Ok((c0 + c1) * 0.5)
-            }
-            "bitmap" => {
-                let file = Self::elements(t)
-                    .find(|c| c.attribute("name") == Some("filename"))
-                    .ok_or_else(|| self.err(t, "a bitmap needs <string name=\"filename\">"))?;
-                let file = self.required(file, "value")?;
-                let img = super::image_io::load_image(&self.dir.join(file), &self.file, &self.describe(t))?;
-                Ok(img.mean())
-            }
-            other => Err(self.err(t, format!("unsupported texture type \"{other}\""))),
-        }
-    }
-
-    /// A constant colour or a texture's mean, for parameters that cannot vary over a surface.
+    /// A constant colour or a texture's mean, for parameters that cannot vary over a surface;
+    /// `true` if it was a texture.
     fn mean_color(&self, s: Spectrum<'a, 'i>) -> Result<(Vec3, bool)> {
         match s {
             Spectrum::Const(c) => Ok((c, false)),
-            Spectrum::Texture(t) => Ok((self.texture_mean(t)?, true)),
+            Spectrum::Texture { node, param } => {
+                let mean = match self.texture_def(node, &param)? {
+                    TextureDef::Bitmap { file, .. } => super::image_io::load_image(&file, &self.file, &self.texture_field(node, &param))?.mean(),
+                    TextureDef::Checkerboard { color0, color1, .. } => (color0 + color1) * 0.5,
+                };
+                Ok((mean, true))
+            }
         }
     }
 
@@ -621,11 +673,11 @@ impl<'a, 'i> Loader<'a, 'i> {
         };
         let kind = match ty.as_str() {
             "diffuse" | "roughdiffuse" => {
-                let albedo = self.albedo(reflectance.unwrap_or(Spectrum::Const(Vec3::splat(0.5))))?;
+                let albedo = self.color_param(reflectance.unwrap_or(Spectrum::Const(Vec3::splat(0.5))))?;
                 MaterialKind::Lambert { albedo }
             }
             "plastic" | "roughplastic" => {
-                let albedo = self.albedo(reflectance.unwrap_or(Spectrum::Const(Vec3::splat(0.5))))?;
+                let albedo = self.color_param(reflectance.unwrap_or(Spectrum::Const(Vec3::splat(0.5))))?;
                 let s = specular_mean(self, specular, "specular reflectance")?;
                 if (s - Vec3::ONE).abs().max_element() > 1e-3 {
                     self.warn(n, format!("plastic specularReflectance {s} is ignored (the coat reflects by Fresnel alone)"));
@@ -658,7 +710,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                 if e.min_element() <= 0.0 {
                     return Err(self.err(n, format!("eta {e} must be positive")));
                 }
-                let specular_tint = specular_mean(self, specular, "specular reflectance")?;
+                let specular_tint = self.color_param(specular.unwrap_or(Spectrum::Const(Vec3::ONE)))?;
                 MaterialKind::Conductor { eta: e / ext_eta, k: kk / ext_eta, roughness, specular_tint }
             }
             other => return Err(self.err(n, format!("unsupported BSDF type \"{other}\""))),
@@ -714,7 +766,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                     for p in Self::elements(c) {
                         match p.attribute("name") {
                             Some("radiance") => radiance = Some(self.color(p)?),
-                            Some("samplingWeight") => {}
+                            Some("samplingWeight" | "sampling_weight") => {}
                             _ => return Err(self.err(p, "unsupported area emitter parameter")),
                         }
                     }
@@ -740,6 +792,9 @@ impl<'a, 'i> Loader<'a, 'i> {
             self.warn(n, format!("mesh '{}' not found; skipping this shape", p.display()));
             return Ok(());
         }
+        if matches!(ty.as_str(), "cube" | "disk" | "sphere") && kind_is_textured(&def.kind) {
+            self.warn(n, format!("a textured BSDF on a {ty}: its texture coordinates follow our {ty}, not Mitsuba's"));
+        }
         let material = self.material_for(&def, emission);
         let (v0, t0) = (self.b.mesh.positions.len(), self.b.mesh.triangles.len());
         let field = self.describe(n);
@@ -751,7 +806,13 @@ impl<'a, 'i> Loader<'a, 'i> {
                 obj::load(&mut self.b, &p, &to_world, &choice, &field)?;
                 None
             }
-            "rectangle" => Some(primitives::quad()),
+            "rectangle" => {
+                // Mitsuba's rectangle has uv = ((x + 1)/2, (y + 1)/2); our quad puts v = 0 at
+                // y = +1 (the top of an image seen from +Z).
+                let mut q = primitives::quad();
+                q.uvs.iter_mut().for_each(|uv| uv.y = 1.0 - uv.y);
+                Some(q)
+            }
             "cube" => Some(primitives::cube()),
             "disk" => Some(primitives::disk(1.0, 64)),
             "sphere" => Some(primitives::sphere(radius, 64).transformed(&Mat4::from_translation(center))),
@@ -799,10 +860,19 @@ impl<'a, 'i> Loader<'a, 'i> {
         for c in Self::elements(n) {
             match c.attribute("name") {
                 Some("radiance") => radiance = self.color(c)?,
-                Some("samplingWeight") => {}
+                Some("samplingWeight" | "sampling_weight") => {}
                 _ => return Err(self.err(c, "unsupported constant emitter parameter")),
             }
         }
         Ok(Environment::Constant(radiance))
+    }
+}
+
+/// Whether any colour of a material varies over the surface.
+fn kind_is_textured(kind: &MaterialKind) -> bool {
+    match kind {
+        MaterialKind::Lambert { albedo } | MaterialKind::Plastic { albedo, .. } => albedo.is_textured(),
+        MaterialKind::Conductor { specular_tint, .. } => specular_tint.is_textured(),
+        MaterialKind::Dielectric { .. } => false,
     }
 }

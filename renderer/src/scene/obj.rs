@@ -128,7 +128,7 @@ fn convert_material(b: &mut Builder, mtl: &tobj::Material, mtl_dir: &Path, field
     let albedo = match &mtl.diffuse_texture {
         Some(tex) => {
             let sub = format!("{field} (MTL material '{}' map_Kd)", mtl.name);
-            ColorParam::Texture { index: b.albedo_texture(&mtl_dir.join(tex), &sub)?, scale: Vec3::ONE }
+            ColorParam::texture(b.albedo_texture(&mtl_dir.join(tex), &sub)?, Vec3::ONE)
         }
         None => ColorParam::Const(kd.min(Vec3::ONE)),
     };

@@ -460,7 +460,7 @@ fn material(check: &Check, b: &mut Builder, dir: &Path, name: &str, d: &Material
             None => None,
         };
         Ok(match &d.albedo_texture {
-            Some(rel) => ColorParam::Texture { index: b.albedo_texture(&dir.join(rel), &f("albedo_texture"))?, scale: scale.unwrap_or(Vec3::ONE) },
+            Some(rel) => ColorParam::texture(b.albedo_texture(&dir.join(rel), &f("albedo_texture"))?, scale.unwrap_or(Vec3::ONE)),
             None => ColorParam::Const(scale.unwrap_or(Vec3::splat(0.5))),
         })
     };
@@ -499,7 +499,7 @@ fn material(check: &Check, b: &mut Builder, dir: &Path, name: &str, d: &Material
                 Some(t) => check.unit3(&f("specular_tint"), t)?,
                 None => Vec3::ONE,
             };
-            MaterialKind::Conductor { eta, k, roughness, specular_tint }
+            MaterialKind::Conductor { eta, k, roughness, specular_tint: ColorParam::Const(specular_tint) }
         }
     };
     let emission = match d.emission {
