@@ -60,11 +60,28 @@ fn train_g_p_guided_and_resume() {
     let events: Vec<serde_json::Value> = log.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
     assert_eq!(events.iter().filter(|e| e["event"] == "step").count(), 3);
     assert!(events.iter().filter(|e| e["event"] == "val").all(|e| e["rel_mse"].as_f64().is_some_and(f64::is_finite)));
+    // A g run can continue from a trained g (warm start: the finetune alone here), and moves it;
+    // a P model is refused as its start.
+    let g_file = out("g.safetensors");
+    let mut w = vec!["train", "--method", "g", "--from-g", &g_file, "--branch-steps", "0", "--finetune-steps", "1", "--val-every", "1", "--quiet", "-o"];
+    let gw = out("gw.safetensors");
+    w.push(&gw);
+    w.extend_from_slice(&common[..6]);
+    let warm = pixguide(&w);
+    assert!(warm.starts_with("trained g (default): 1 steps"), "{warm}");
+    let (tw, tg) = (tensors(&base.join("gw.safetensors")), tensors(&base.join("g.safetensors")));
+    assert_eq!(tw.iter().map(|t| &t.0).collect::<Vec<_>>(), tg.iter().map(|t| &t.0).collect::<Vec<_>>());
+    assert_ne!(tw, tg, "the warm-started finetune step changed nothing");
+    let o = Command::new(env!("CARGO_BIN_EXE_pixguide"))
+        .args(["train", "--data", d, "--method", "g", "--from-p", &out("p.safetensors"), "--patch", "24", "-o", &out("x.safetensors"), "--quiet"])
+        .output()
+        .unwrap();
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--from-p"), "{}", String::from_utf8_lossy(&o.stderr));
     // Guided without its pretrained models is a clear error, not a crash.
     let o = Command::new(env!("CARGO_BIN_EXE_pixguide")).args(["train", "--data", d, "--method", "guided", "--patch", "24", "-o", &out("x.safetensors"), "--quiet"]).output().unwrap();
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--from-g"));
     // --all trains the whole comparison, reading each kind of dataset once for all ten runs;
-    // at --all-scale 0.001 its g run has 3 branch steps and no finetune (the plan's 2600 + 0),
+    // at --all-scale 0.001 its g run has 3 branch steps and 1 finetune step (the plan's 2900 + 400),
     // and the shared dataset gives it the same weights as a standalone run's own read.
     let all_dir = out("all");
     let mut a = vec!["train", "--all", "--all-scale", "0.001", "--out-dir", &all_dir];
@@ -85,7 +102,7 @@ fn train_g_p_guided_and_resume() {
         let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + n]).unwrap();
         assert_eq!(header["__metadata__"]["pixguide.preset"], "half", "{name}-half");
     }
-    let mut g3 = vec!["train", "--method", "g", "--branch-steps", "3", "--finetune-steps", "0", "--val-every", "1", "--quiet", "-o"];
+    let mut g3 = vec!["train", "--method", "g", "--branch-steps", "3", "--finetune-steps", "1", "--val-every", "1", "--quiet", "-o"];
     let g3_out = out("g3.safetensors");
     g3.push(&g3_out);
     g3.extend_from_slice(&common[..6]);

@@ -161,7 +161,12 @@ pub fn initial_model(opts: &TrainOptions, from_g: Option<&Path>, from_p: Option<
     match (opts.method, from_g, from_p) {
         (Method::G, Some(g), None) => model = load_pretrained(g, Method::G, &cfg, device)?,
         (Method::P, None, Some(p)) => model = load_pretrained(p, Method::P, &cfg, device)?,
-        _ => {}
+        (Method::Guided, _, _) | (_, None, None) => {}
+        (m, _, _) => {
+            return Err(TrainError::Options(format!(
+                "a {m} model can start only from a {m} model: --from-g goes with --method g or guided, --from-p with p or guided"
+            )))
+        }
     }
     if schedule::needs_pretrained(opts.method, opts.ablation) {
         let (Some(g), Some(p)) = (from_g, from_p) else {
