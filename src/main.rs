@@ -1,4 +1,5 @@
-//! `pixguide`: render scenes, and (soon) denoise them, from one program.
+//! `pixguide`: render scenes and denoise them, train and evaluate the denoisers, from one program
+//! (docs/architecture.md).
 
 mod alloc_stats;
 mod cli;

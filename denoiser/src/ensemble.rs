@@ -10,7 +10,7 @@ use burn::tensor::{Device, Tensor};
 use crate::kpcn::channels::{G_BLOCK, P_BLOCK};
 use crate::layers::{center_crop, conv_macs, sanitize, Activation, ConvStack, Init, Padding, INPUT_LIMIT};
 
-/// Paper size by default: 9 layers 5×5 same padding, width 50 ("half": 25).
+/// Paper size by default: 9 layers 5×5 same padding, width 50 (`paper-half`: 25).
 #[derive(Config, Debug)]
 pub struct EnsembleConfig {
     #[config(default = 9)]

@@ -710,8 +710,10 @@ mod tests {
         }
     }
 
-    /// The automatic tile no longer shrinks with spp (windows hold per-pixel inputs only), and
-    /// the tiled pass's context is the KPCN margin plus E's radius, without the U-Net's.
+    /// The automatic tile depends on the backbone only, not on spp (windows hold per-pixel
+    /// inputs only): 256 for KPCN columns, 1024 for U-Net columns, whose receptive radius is far
+    /// larger. The tiled pass's context is the column's radius plus E's, without the
+    /// path-manifold U-Net's.
     #[test]
     fn windows_carry_the_receptive_radius() {
         let c = DenoiserConfig::kpcn_cpu();
@@ -722,6 +724,7 @@ mod tests {
         assert_eq!(unet_window_side(&c, Method::Guided, 256), 320);
         assert_eq!(auto_tile(&c), 256);
         let ms = DenoiserConfig::cpu_default();
+        assert_eq!(auto_tile(&ms), 1024);
         let r = ms.column_radius();
         assert_eq!(context(&ms, Method::G), r);
         assert_eq!(window_side(&ms, Method::G, 1024) % 16, 0);

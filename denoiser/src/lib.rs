@@ -1,8 +1,9 @@
 //! Pixel-wise guidance Monte Carlo denoiser (Han et al. 2023) on burn 0.22.
 //!
 //! The crate holds the networks, the differentiable ops, the losses, preprocessing, training and
-//! tiled inference. Facts and their sources: `docs/method.md` §2–§6 (shared docs);
-//! design decisions and measured costs: `docs/denoiser-design.md`.
+//! tiled inference. Facts and their sources: docs/method.md §2–§7 and §12; where this crate sits
+//! in the whole flow: docs/architecture.md; design decisions and measured costs:
+//! docs/denoiser-design.md.
 //!
 //! Layout convention: every image tensor is NCHW `[batch, channels, height, width]`; per-sample
 //! tensors are `[batch, samples, channels, height, width]`. All transforms are in the branch
@@ -25,6 +26,7 @@
 //! - [`train`]: data, patch sampling, the staged schedule, checkpoints (docs/training.md).
 //! - [`oidn`]: Intel Open Image Denoise, loaded at run time, as a baseline denoiser.
 //! - [`layers`]: convolution with deterministic init, input sanitising, cropping.
+//! - [`rng`]: the seeded random stream of weight init and loss permutations.
 
 pub mod column;
 pub mod ensemble;

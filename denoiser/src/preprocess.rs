@@ -89,7 +89,7 @@ pub struct PreparedTarget {
     pub total: Vec<f32>,
 }
 
-/// Tensors of a batch of crops, ready for [`crate::model::Denoiser::forward`].
+/// Tensors of a batch of crops, ready for [`crate::method::MethodModel::forward`].
 #[derive(Clone, Debug)]
 pub struct InputTensors {
     pub diffuse: BranchInput,

@@ -86,7 +86,7 @@ pub enum WeightsError {
 ///
 /// Tensors are stored as f16: it halves the shipped files (the guided model is 2.5 MB instead of
 /// 5), and the rounding (relative 2⁻¹¹ per weight) moves denoised pixels far less than the noise
-/// the models remove (see `f16_storage_is_close_and_stable`). Training checkpoints keep f32,
+/// the models remove (see `tests::save_load_round_trip`). Training checkpoints keep f32,
 /// since a resumed run must continue bit for bit.
 pub fn save(
     path: &Path,

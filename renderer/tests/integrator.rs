@@ -1,5 +1,5 @@
-//! Integrator correctness: furnace tests, unbiasedness (1/spp convergence), determinism across
-//! thread counts, and hard cases that must stay finite.
+//! Integrator correctness: furnace tests, unbiasedness (1/spp convergence) and determinism across
+//! thread counts. The hard cases that must stay finite are in hard_cases.rs.
 
 mod common;
 

@@ -1,4 +1,8 @@
-//! Weight files and resumable checkpoints.
+//! Resumable checkpoints: weights, optimizer state and run state of a training run.
+//!
+//! These are not the shipped weight files: `pixguide train` writes a finished run's output with
+//! [`crate::weights::save`] (f16 tensors, config and provenance in the metadata). Checkpoints
+//! keep f32, since a resumed run must continue bit for bit.
 //!
 //! Weights: safetensors, one f32 tensor per parameter named by its module path
 //! (`diffuse.d_g.net.layers.0.weight`), string metadata alongside. The optimizer state is
@@ -6,9 +10,6 @@
 //! model built, so a checkpoint also stores each path's id and loading restores those ids.
 //! Every file is written to a temporary name and renamed, so a crash leaves the previous
 //! checkpoint intact; `state.json` is written last and names the step the other files hold.
-//!
-//! TODO(weights): the shipped weight format is `denoiser::weights` (branch `infer`); switch
-//! [`save_weights`] / [`load_weights`] to it once merged (same tensor names).
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
