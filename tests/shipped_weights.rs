@@ -71,3 +71,13 @@ fn shipped_g_model_beats_the_noisy_render() {
 fn shipped_guided_half_model_beats_the_noisy_render() {
     check("guided-half", Method::Guided);
 }
+
+/// The opt-in swap models (preset `swap`, docs/denoiser.md): their files name the low-band-swap
+/// compositor, and they run with it.
+#[test]
+fn shipped_swap_guided_model_beats_the_noisy_render() {
+    let l = denoiser::weights::load(&root().join("denoiser/weights/swap/guided-default.safetensors"), &denoiser::cpu_device()).unwrap();
+    let m = l.config.mskp.as_ref().expect("a U-Net model");
+    assert_eq!((m.kernel_scales, m.compositor), (5, denoiser::mskp::ScaleCompositor::LowPassSwap));
+    check("swap/guided-default", Method::Guided);
+}

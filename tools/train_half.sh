@@ -1,6 +1,6 @@
 #!/bin/bash
 # The half-size comparison models (preset `half`: 50 % of the default preset's channels), each
-# given the steps and rates of its default-size twin (the shipped runs of 2026-11-25 afternoon:
+# given the steps and rates of its default-size twin (the swap runs of 2026-11-25 afternoon:
 # g 2900 + 400 tone-mapped finetune, p 600 at 5e-4, guided 200; docs/denoiser.md), so the two
 # sizes differ only in width.
 # Deterministic from the seed; rerunning resumes from the checkpoints.

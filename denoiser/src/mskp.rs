@@ -6,22 +6,21 @@
 //! max-pooling, bilinear upsampling, skip concatenation) sees ≥ 64 px of context for a fraction of
 //! the multiply-accumulates, and its decoder predicts at each of the finest `kernel_scales` levels
 //! a small k×k softmax kernel that filters the colour pyramid at that level (2×2 box
-//! downsampling). The filtered levels are composited coarse to fine by Vogels et al. 2018's scale
-//! compositor, with a per-pixel weight α = sigmoid(·) predicted at the finer level:
+//! downsampling). The filtered levels are composited coarse to fine with a per-pixel weight
+//! α = sigmoid(·) predicted at the finer level, in one of two ways ([`ScaleCompositor`]):
 //!
-//!   out_{S−1} = f_{S−1};  out_s = f_s + α_s·(up(out_{s+1}) − up(down(f_s))).
+//!   convex blend (`default`):   out_s = (1 − α_s)·f_s + α_s·up(out_{s+1})
+//!   low-band swap (`swap`):     out_s = f_s + α_s·(up(out_{s+1}) − up(down(f_s)))
 //!
-//! α replaces only the low-pass band of the fine level by the coarse result; the fine level's
-//! high frequencies (the edges its kernel kept) survive. The plain convex blend
-//! (1 − α)·f_s + α·up(out_{s+1}) that this replaced blurred every edge wherever α > 0 (measured
-//! 2026-11-25: the error of converged Cornell-box frames sat in lines along every silhouette and
-//! around the light; docs/denoiser.md). The output is no longer a convex combination of input
-//! colours, so it can undershoot slightly at an edge (inference clamps radiance at 0), but a
-//! constant image is still returned unchanged, and the identity (α = 0, a one-hot centre kernel
-//! at full resolution) is in reach: a converged input can be given back. The default predicts
-//! kernels at all 5 U-Net levels (5×5 taps at 1/16 resolution reach ≈ 48 px of box-averaged
-//! colour), for frames whose samples are too sparse for a 20 px reach, such as veach-ajar at
-//! 2 spp (docs/denoiser.md).
+//! with out_{S−1} = f_{S−1}. The convex blend keeps every level a convex combination of input
+//! colours (softmax kernels, box averages, bilinear weights, α ∈ (0,1)), so the column can neither
+//! create energy nor overshoot, and the identity (α = 0, a one-hot centre kernel at full
+//! resolution) is in reach; but wherever α > 0 it blurs the fine level's edges. The swap replaces
+//! only the fine level's own low-pass band, so those edges survive even at α = 1; its output can
+//! undershoot at an edge (inference clamps radiance at 0). The swap is Vogels et al. 2018's scale
+//! compositor, ⚠ the subject of US patent 10,699,382 (docs/method.md §12): it is opt-in (the
+//! `swap` preset, kernels at all 5 levels) until the project decides it may ship it; the
+//! measured difference is in docs/denoiser.md ("The swap models").
 //!
 //! Borders: each level is reflect-padded before filtering, so the kernels never read zeros and the
 //! image edge is not darkened (the KPCN's ⚠ of docs/method.md §3). The network output is cropped
@@ -49,7 +48,7 @@ pub struct MsKpConfig {
     #[config(default = 2)]
     pub convs_per_block: usize,
     /// Levels (from full resolution) at which a kernel is predicted and applied.
-    #[config(default = 5)]
+    #[config(default = 3)]
     pub kernel_scales: usize,
     /// Predicted filter size k (odd) at every scale.
     #[config(default = 5)]
@@ -58,7 +57,8 @@ pub struct MsKpConfig {
     #[config(default = 8)]
     pub margin: usize,
     /// How the filtered levels are composited. Weight files written before this field existed
-    /// have the convex blend, so that is what a missing field means; `default` uses the swap.
+    /// have the convex blend, so that is what a missing field means; only the opt-in `swap`
+    /// preset uses the swap, which is covered by US patent 10,699,382 (docs/method.md §12).
     #[config(default = "ScaleCompositor::ConvexBlend")]
     pub compositor: ScaleCompositor,
 }
@@ -68,7 +68,8 @@ pub struct MsKpConfig {
 pub enum ScaleCompositor {
     /// out_s = (1 − α)·f_s + α·up(out_{s+1}): blurs edges wherever α > 0 (2026-11-24 models).
     ConvexBlend,
-    /// Vogels et al. 2018: out_s = f_s + α·(up(out_{s+1}) − up(down(f_s))).
+    /// Vogels et al. 2018: out_s = f_s + α·(up(out_{s+1}) − up(down(f_s))). ⚠ The scale
+    /// compositor of US patent 10,699,382; opt-in (`swap` preset), never the default.
     LowPassSwap,
 }
 

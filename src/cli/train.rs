@@ -174,7 +174,7 @@ const fn item(name: &'static str, method: &'static str, ablation: Option<&'stati
     PlanItem { name, method, ablation, preset, steps, secs_per_step }
 }
 
-/// The runs of 2026-11-25 (docs/denoiser.md, "The shipped weights"): step counts that fill
+/// The runs of 2026-11-25 (docs/denoiser.md, "The swap models"): step counts that fill
 /// ≈ 30–36 min per pretraining run and ≈ 16 min per joint run at the seconds per step measured
 /// there (one thread each, two runs side by side, patch 96, batch 2); g ends with the
 /// tone-mapped finetune. both keeps its earlier count: no both run of the current U-Net has
