@@ -124,6 +124,9 @@ pub struct TestScene {
     pub name: String,
     pub path: PathBuf,
     pub reference: PathBuf,
+    /// [`file_id`] of the reference: a re-rendered reference (a scene or renderer fix) makes
+    /// every cached score of the scene stale.
+    pub reference_id: String,
     pub width: u32,
     pub height: u32,
 }
@@ -141,6 +144,9 @@ pub struct Record {
     pub seed: u64,
     pub width: u32,
     pub height: u32,
+    /// [`TestScene::reference_id`] of a quality record's reference ("" for breakdowns, which
+    /// measure time only).
+    pub reference: String,
     pub rel_mse: f64,
     pub rel_mse_gamma: f64,
     pub one_minus_ssim: f64,
@@ -164,13 +170,13 @@ pub struct Record {
 
 impl Record {
     fn key(&self) -> String {
-        key(&self.kind, &self.scene, self.spp, &self.method, &self.weights, self.seed, self.width, self.height)
+        key(&self.kind, &self.scene, &self.reference, self.spp, &self.method, &self.weights, self.seed, self.width, self.height)
     }
 }
 
 #[allow(clippy::too_many_arguments)]
-fn key(kind: &str, scene: &str, spp: u32, method: &str, weights: &str, seed: u64, w: u32, h: u32) -> String {
-    format!("{kind}|{scene}|{spp}|{method}|{weights}|{seed}|{w}x{h}")
+fn key(kind: &str, scene: &str, reference: &str, spp: u32, method: &str, weights: &str, seed: u64, w: u32, h: u32) -> String {
+    format!("{kind}|{scene}@{reference}|{spp}|{method}|{weights}|{seed}|{w}x{h}")
 }
 
 /// 1-minute load average (0 where /proc is missing).
@@ -259,7 +265,8 @@ fn scenes(list: &Path) -> Result<Vec<TestScene>> {
         let dim = |f: &str| -> Result<u32> {
             meta.get(f).and_then(|v| v.as_u64()).filter(|&v| v > 0 && v < 1 << 16).map(|v| v as u32).with_context(|| format!("{}: field `{f}` is missing or not a positive integer", json.display()))
         };
-        out.push(TestScene { name, path, reference, width: dim("width")?, height: dim("height")? });
+        let reference_id = file_id(&reference)?;
+        out.push(TestScene { name, path, reference, reference_id, width: dim("width")?, height: dim("height")? });
     }
     if out.is_empty() {
         bail!("{} lists no scenes", list.display());
@@ -360,7 +367,7 @@ pub struct Outcome {
 
 impl Outcome {
     pub fn quality(&self, scene: &str, spp: u32, m: &MethodSpec, seed: u64, s: &TestScene) -> Option<&Record> {
-        self.records.get(&key("quality", scene, spp, &m.name, &m.id, seed, s.width, s.height))
+        self.records.get(&key("quality", scene, &s.reference_id, spp, &m.name, &m.id, seed, s.width, s.height))
     }
 }
 
@@ -435,7 +442,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
                     n == "noisy" || in_table || (picture && PICTURE_METHODS.contains(&n))
                 })
                 .collect();
-            let uncached = |i: usize| cache.get(&key("quality", &s.name, spp, &methods[i].name, &methods[i].id, a.seed, s.width, s.height)).is_none();
+            let uncached = |i: usize| cache.get(&key("quality", &s.name, &s.reference_id, spp, &methods[i].name, &methods[i].id, a.seed, s.width, s.height)).is_none();
             // Pictures are redrawn when a file is missing, or when a picture method is measured
             // anew (new weights, or a method new to the page such as OIDN), whose panel would
             // otherwise be stale or absent.
@@ -464,7 +471,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
     if a.breakdown_size > 0 {
         for g in (0..methods.len()).filter(|&i| BREAKDOWN_METHODS.contains(&methods[i].name.as_str()) && methods[i].available()) {
             for &spp in &a.spp {
-                let k = key("breakdown", &breakdown_scene, spp, &methods[g].name, &methods[g].id, a.seed, a.breakdown_size, a.breakdown_size);
+                let k = key("breakdown", &breakdown_scene, "", spp, &methods[g].name, &methods[g].id, a.seed, a.breakdown_size, a.breakdown_size);
                 if cache.get(&k).is_none() {
                     breakdown_todo.push((g, spp));
                 } else {
@@ -538,6 +545,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
             let mut r = Record {
                 kind: "quality".into(),
                 scene: s.name.clone(),
+                reference: s.reference_id.clone(),
                 spp: job.spp,
                 method: m.name.clone(),
                 weights: m.id.clone(),
