@@ -115,3 +115,30 @@ fn train_g_p_guided_and_resume() {
     train(&["--method", "g", "-o", &out("g2.safetensors"), "--resume"]);
     assert_eq!(tensors(&base.join("g2.safetensors")), tensors(&base.join("g.safetensors")));
 }
+
+/// `--backend tch` in a build without the `tch` feature fails before reading any data, naming
+/// the feature; with the feature, a G model trains on LibTorch.
+#[test]
+fn backend_tch() {
+    let base = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("train-backend");
+    std::fs::remove_dir_all(&base).ok();
+    let out = base.join("g.safetensors");
+    #[cfg(not(feature = "tch"))]
+    {
+        let o = Command::new(env!("CARGO_BIN_EXE_pixguide"))
+            .args(["train", "--data", "no-such-dataset", "--backend", "tch", "-o", out.to_str().unwrap()])
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains("--features tch") && err.contains("install_libtorch.sh"), "{err}");
+    }
+    #[cfg(feature = "tch")]
+    {
+        let data = base.join("data");
+        let d = data.to_str().unwrap();
+        pixguide(&["dataset", "--scenes", "scenes/cornell-box/scene.toml", "--shots", "2", "--spp", "2", "--ref-spp", "8", "--size", "32x32", "--quiet", "-o", d]);
+        let g = pixguide(&["train", "--backend", "tch", "--data", d, "--patch", "24", "--batch", "2", "--branch-steps", "2", "--finetune-steps", "0", "--val-every", "1", "--quiet", "--method", "g", "-o", out.to_str().unwrap()]);
+        assert!(g.starts_with("trained g (default): 2 steps"), "{g}");
+    }
+}

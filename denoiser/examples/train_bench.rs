@@ -64,6 +64,7 @@ fn main() {
                 checkpoint_every: 0,
                 minutes: None,
                 pause_after: None,
+                backend: Default::default(),
                 metadata: Default::default(),
             };
             (Some(model), optimizer(), opts, Vec::<f64>::new())

@@ -62,6 +62,73 @@ pub fn cpu_training_device() -> Device {
     Device::flex().autodiff()
 }
 
+/// The burn backend a run computes on. The model code is the same for all: burn's [`Device`]
+/// dispatches every op. `Flex` (pure Rust) is always there; `Tch` (LibTorch, CPU) only with the
+/// crate's `tch` cargo feature (docs/training-tch.md; `tools/install_libtorch.sh`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Backend {
+    #[default]
+    Flex,
+    Tch,
+}
+
+impl Backend {
+    /// Every backend name [`Backend::parse`] knows, compiled in or not.
+    pub const NAMES: [&'static str; 2] = ["flex", "tch"];
+
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "flex" => Some(Self::Flex),
+            "tch" | "libtorch" => Some(Self::Tch),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Flex => "flex",
+            Self::Tch => "tch",
+        }
+    }
+
+    /// Whether this build can run the backend.
+    pub fn available(self) -> bool {
+        match self {
+            Self::Flex => true,
+            Self::Tch => cfg!(feature = "tch"),
+        }
+    }
+
+    /// The backend's CPU device without gradients, or why this build has none.
+    pub fn device(self) -> Result<Device, String> {
+        match self {
+            Self::Flex => Ok(Device::flex()),
+            #[cfg(feature = "tch")]
+            #[allow(deprecated)] // burn 0.22 deprecates burn-tch in favour of CubeCL backends
+            Self::Tch => Ok(Device::libtorch()),
+            #[cfg(not(feature = "tch"))]
+            Self::Tch => Err("backend tch is not compiled in: build with `--features tch` (LibTorch from a PyTorch 2.9.0 venv: run tools/install_libtorch.sh, see docs/training-tch.md)".into()),
+        }
+    }
+
+    /// The backend's CPU device with autodiff, for training.
+    pub fn training_device(self) -> Result<Device, String> {
+        self.device().map(Device::autodiff)
+    }
+}
+
+/// LibTorch's intra-op thread count (its default: the physical cores; `OMP_NUM_THREADS` sets it).
+#[cfg(feature = "tch")]
+pub fn torch_threads() -> usize {
+    tch::get_num_threads().max(0) as usize
+}
+
+/// Sets LibTorch's intra-op thread count (flex uses rayon's pool: `RAYON_NUM_THREADS`).
+#[cfg(feature = "tch")]
+pub fn set_torch_threads(n: usize) {
+    tch::set_num_threads(n as i32)
+}
+
 #[cfg(test)]
 #[allow(deprecated)]
 pub(crate) mod test_util {

@@ -131,6 +131,18 @@ pub struct TrainArgs {
     pub max_train_shots: Option<usize>,
     #[arg(short, long)]
     pub quiet: bool,
+    /// Backend of the training steps: flex (pure Rust, always built) or tch (LibTorch on the
+    /// CPU; needs a build with `--features tch`, see docs/training-tch.md). Same model code and
+    /// weight files on both.
+    #[arg(long, default_value = "flex", value_parser = denoiser::Backend::NAMES)]
+    pub backend: String,
+}
+
+/// The `--backend` choice, or an error naming the cargo feature a missing backend needs.
+fn backend(a: &TrainArgs) -> Result<denoiser::Backend> {
+    let b = denoiser::Backend::parse(&a.backend).with_context(|| format!("--backend {}: expected flex or tch", a.backend))?;
+    b.device().map_err(|e| anyhow::anyhow!("--backend {}: {e}", a.backend))?;
+    Ok(b)
 }
 
 fn schedule_options(a: &TrainArgs, config: &DenoiserConfig) -> ScheduleOptions {
@@ -239,6 +251,8 @@ fn run_all(a: TrainArgs) -> Result<()> {
 }
 
 pub fn run(a: TrainArgs) -> Result<()> {
+    // Before the dataset is read: a backend this build lacks fails at once.
+    backend(&a)?;
     if a.all {
         return run_all(a);
     }
@@ -311,7 +325,10 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
     metadata.insert("seed".to_string(), a.seed.to_string());
     metadata.insert("dataset".to_string(), a.data.display().to_string());
     metadata.insert("command".to_string(), command.join(" "));
+    let backend = backend(&a)?;
+    metadata.insert("backend".to_string(), backend.name().to_string());
     let opts = TrainOptions {
+        backend,
         method,
         ablation,
         config,
@@ -329,7 +346,7 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
         metadata: metadata.clone(),
     };
 
-    let device = denoiser::cpu_training_device();
+    let device = backend.training_device().map_err(anyhow::Error::msg)?;
     let model = tr::initial_model(&opts, a.from_g.as_deref(), a.from_p.as_deref(), &device)?;
     let descriptors = method.needs_descriptors();
     let k = match cache.iter().position(|c| c.0 == descriptors) {
@@ -437,14 +454,15 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
         git_commit: git_commit(),
         date: iso_date_utc(),
         notes: format!(
-            "variant {name}; stages {}; patch {}, batch {}, spp {:?}, sampling {}; {} train + {} val shots",
+            "variant {name}; stages {}; patch {}, batch {}, spp {:?}, sampling {}; {} train + {} val shots; backend {}",
             serde_json::to_string(&opts.stages)?,
             a.patch,
             a.batch,
             data.spps,
             a.sampling,
             data.train.len(),
-            data.val.len()
+            data.val.len(),
+            opts.backend.name()
         ),
     };
     weights::save(&output, &outcome.model, &tr::effective_config(&opts), &a.preset, &provenance)?;

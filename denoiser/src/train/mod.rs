@@ -79,6 +79,9 @@ pub struct TrainOptions {
     pub pause_after: Option<usize>,
     /// Extra metadata written into weight files (provenance).
     pub metadata: BTreeMap<String, String>,
+    /// The burn backend steps and validation run on. Not part of the run's identity: a
+    /// checkpoint written on one backend resumes on another.
+    pub backend: crate::Backend,
 }
 
 impl TrainOptions {
@@ -304,7 +307,7 @@ pub fn validate(model: &MethodModel, data: &Dataset, opts: &TrainOptions) -> Opt
         return None;
     }
     let m = model.valid();
-    let dev = crate::cpu_device();
+    let dev = opts.backend.device().expect("run() checked the backend");
     let margin = opts.config.margin();
     let grid = patches::grid(data.width, data.height, opts.patch);
     let with_desc = opts.method.needs_descriptors();
@@ -344,7 +347,7 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
     if opts.batch == 0 {
         return Err(TrainError::Options("batch must be ≥ 1".into()));
     }
-    let device = crate::cpu_training_device();
+    let device = opts.backend.training_device().map_err(TrainError::Options)?;
     let ckpt = ckpt_dir.map(|d| CheckpointPaths { dir: d.to_path_buf() });
     let started = Instant::now();
     let mut model = model;
@@ -364,7 +367,6 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
             st = s;
         }
     }
-    let _ = device;
     let total_planned: usize = opts.stages.iter().map(|s| s.steps).sum::<usize>().max(1);
     let margin = opts.config.margin();
     let with_desc = opts.method.needs_descriptors();
@@ -413,7 +415,7 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
             session_steps += 1;
             let t0 = Instant::now();
             let (refs, mut rng) = draw_batch(data, opts, k, st.step);
-            let (input, target) = batch_tensors(&data.train, &refs, &data.spps, opts.patch, margin, with_desc, &crate::cpu_training_device());
+            let (input, target) = batch_tensors(&data.train, &refs, &data.spps, opts.patch, margin, with_desc, &device);
             let (m, loss) = match train_step(model, &mut optim, input, &target, stage, stage.lr_factor(st.step), &e_params, &mut rng) {
                 Ok(r) => r,
                 Err(loss) => {

@@ -99,6 +99,7 @@ fn options(method: Method, ablation: Option<Ablation>, sched: &ScheduleOptions) 
         checkpoint_every: 2,
         minutes: None,
         pause_after: None,
+        backend: Default::default(),
         metadata: BTreeMap::new(),
     }
 }
