@@ -52,5 +52,7 @@ To build and run with the LibTorch backend, in this shell:
 
 (LIBTORCH_USE_PYTORCH=1 makes torch-sys take libtorch from this venv's python instead of
 downloading it; the binary needs LD_LIBRARY_PATH at run time. With a custom CARGO_TARGET_DIR,
-the binary is there instead of target/.)
+the binary is there instead of target/. On a machine shared with other jobs, also
+export OMP_NUM_THREADS=<free cores> or OMP_WAIT_POLICY=PASSIVE: LibTorch's spinning OpenMP
+threads slow down badly when a core is taken; docs/training-tch.md.)
 EOF

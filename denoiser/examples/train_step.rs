@@ -41,8 +41,9 @@ fn kpcn_macs(c: &KpcnConfig, b: usize, size: usize) -> f64 {
     total * b as f64
 }
 
-/// Forward MACs of `method`'s networks (both branches) on a batch (see the file header).
-fn step_forward_macs(cfg: &DenoiserConfig, method: Method, b: usize, size: usize, spp: usize) -> f64 {
+/// Forward MACs of `method`'s networks (both branches) on a batch (see the file header), per
+/// network: [PathNet, D_G, D_P or both-buffers column, E].
+fn step_forward_macs(cfg: &DenoiserConfig, method: Method, b: usize, size: usize, spp: usize) -> [f64; 4] {
     let input = (b * size * size) as f64;
     let o = (size - 2 * cfg.margin()) as f64;
     let output = b as f64 * o * o;
@@ -50,25 +51,25 @@ fn step_forward_macs(cfg: &DenoiserConfig, method: Method, b: usize, size: usize
         Some(_) => cfg.column_macs(v) as f64 * input,
         None => kpcn_macs(&cfg.kpcn_for(v), b, size),
     };
+    let path = if method.needs_descriptors() { cfg.pathnet.macs_per_pixel(spp) as f64 * input } else { 0.0 };
     let per_branch = match method {
-        Method::G => column(Variant::G),
-        Method::P => column(Variant::P) + cfg.pathnet.macs_per_pixel(spp) as f64 * input,
-        Method::Both => column(Variant::GP) + cfg.pathnet.macs_per_pixel(spp) as f64 * input,
-        Method::Guided => {
-            column(Variant::G) + column(Variant::P) + cfg.pathnet.macs_per_pixel(spp) as f64 * input + cfg.ensemble.macs_per_pixel() as f64 * output
-        }
+        Method::G => [0.0, column(Variant::G), 0.0, 0.0],
+        Method::P => [path, 0.0, column(Variant::P), 0.0],
+        Method::Both => [path, 0.0, column(Variant::GP), 0.0],
+        Method::Guided => [path, column(Variant::G), column(Variant::P), cfg.ensemble.macs_per_pixel() as f64 * output],
     };
-    2.0 * per_branch
+    per_branch.map(|m| 2.0 * m)
 }
 
-/// Compute threads of the backend: rayon's pool for flex, LibTorch's intra-op threads for tch.
+/// CPU compute threads of the backend: rayon's pool for flex, LibTorch's intra-op threads for
+/// tch; 0 for a GPU backend.
 fn threads(backend: Backend) -> usize {
     match backend {
         Backend::Flex => rayon::current_num_threads(),
         #[cfg(feature = "tch")]
         Backend::Tch => denoiser::torch_threads(),
-        #[cfg(not(feature = "tch"))]
-        Backend::Tch => 0,
+        // GPU backends (and tch without the feature, which never gets here).
+        _ => 0,
     }
 }
 
@@ -80,11 +81,12 @@ fn main() {
     let method = args.get(5).map(|s| Method::parse(s).unwrap_or_else(|| panic!("unknown method {s}"))).unwrap_or(Method::Guided);
     let cfg = DenoiserConfig::preset(preset).unwrap_or_else(|| panic!("unknown preset {preset}"));
     let backend_name = args.get(6).cloned().or_else(|| std::env::var("PIXGUIDE_BACKEND").ok()).unwrap_or_else(|| "flex".into());
-    let backend = Backend::parse(&backend_name).unwrap_or_else(|| panic!("unknown backend {backend_name}: expected flex or tch"));
+    let backend = Backend::parse(&backend_name).unwrap_or_else(|| panic!("unknown backend {backend_name}: expected one of {:?}", Backend::NAMES));
     let device = backend.training_device().unwrap_or_else(|e| panic!("{e}"));
     let mut model = MethodModel::init(&cfg, method, &device);
     let o = size - 2 * cfg.margin();
-    let fwd_macs = step_forward_macs(&cfg, method, b, size, spp);
+    let part_macs = step_forward_macs(&cfg, method, b, size, spp);
+    let fwd_macs: f64 = part_macs.iter().sum();
     let step_flop = 3.0 * 2.0 * fwd_macs;
     println!(
         "preset {preset}, method {method}, backend {} ({} threads): {:.2} M MAC/pixel forward (whole guided framework) at {spp} spp; batch {b}×{size}² → {o}² outputs",
@@ -159,6 +161,16 @@ fn main() {
         let names = ["fwd PathNet", "fwd D_G", "fwd D_P/G+P", "fwd E+recombine", "losses", "backward", "Adam"];
         let list: Vec<String> = names.iter().zip(parts).filter(|(_, t)| *t > 0.0).map(|(k, t)| format!("{k} {:.0}", t / n * 1e3)).collect();
         println!("breakdown, mean ms per step: {}", list.join(", "));
+        // Forward GFLOP/s per network, and backward's at 2× the forward FLOPs.
+        let mut rates: Vec<String> = names[..4]
+            .iter()
+            .zip(parts)
+            .zip(part_macs)
+            .filter(|((_, t), m)| *t > 0.0 && *m > 0.0)
+            .map(|((k, t), m)| format!("{k} {:.1}", 2.0 * m / (t / n) / 1e9))
+            .collect();
+        rates.push(format!("backward {:.1}", 2.0 * 2.0 * fwd_macs / (parts[5] / n) / 1e9));
+        println!("GFLOP/s by part: {}", rates.join(", "));
     }
     if !times.is_empty() {
         let mean = times.iter().sum::<f64>() / times.len() as f64;

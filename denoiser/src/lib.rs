@@ -63,23 +63,37 @@ pub fn cpu_training_device() -> Device {
 }
 
 /// The burn backend a run computes on. The model code is the same for all: burn's [`Device`]
-/// dispatches every op. `Flex` (pure Rust) is always there; `Tch` (LibTorch, CPU) only with the
-/// crate's `tch` cargo feature (docs/training-tch.md; `tools/install_libtorch.sh`).
+/// dispatches every op. `Flex` (pure Rust, CPU) is always there; the others only with their
+/// cargo feature of this crate (docs/training-tch.md): `Tch` (LibTorch on the CPU) and
+/// `TchCuda` (LibTorch on CUDA GPU 0) with `tch` (`tools/install_libtorch.sh`), `Cuda`
+/// (burn's CubeCL CUDA backend, GPU 0) with `cuda`, `Wgpu` (burn's wgpu backend, default
+/// adapter) with `wgpu`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Backend {
     #[default]
     Flex,
     Tch,
+    TchCuda,
+    Cuda,
+    Wgpu,
+}
+
+/// Why a backend is missing from this build: the feature to build with.
+fn not_compiled(name: &str, feature: &str, how: &str) -> String {
+    format!("backend {name} is not compiled in: build with `--features {feature}` ({how}; see docs/training-tch.md)")
 }
 
 impl Backend {
     /// Every backend name [`Backend::parse`] knows, compiled in or not.
-    pub const NAMES: [&'static str; 2] = ["flex", "tch"];
+    pub const NAMES: [&'static str; 5] = ["flex", "tch", "tch-cuda", "cuda", "wgpu"];
 
     pub fn parse(s: &str) -> Option<Self> {
         match s {
             "flex" => Some(Self::Flex),
             "tch" | "libtorch" => Some(Self::Tch),
+            "tch-cuda" => Some(Self::TchCuda),
+            "cuda" => Some(Self::Cuda),
+            "wgpu" => Some(Self::Wgpu),
             _ => None,
         }
     }
@@ -88,30 +102,45 @@ impl Backend {
         match self {
             Self::Flex => "flex",
             Self::Tch => "tch",
+            Self::TchCuda => "tch-cuda",
+            Self::Cuda => "cuda",
+            Self::Wgpu => "wgpu",
         }
     }
 
-    /// Whether this build can run the backend.
+    /// Whether this build has the backend (a GPU backend may still find no GPU at run time).
     pub fn available(self) -> bool {
         match self {
             Self::Flex => true,
-            Self::Tch => cfg!(feature = "tch"),
+            Self::Tch | Self::TchCuda => cfg!(feature = "tch"),
+            Self::Cuda => cfg!(feature = "cuda"),
+            Self::Wgpu => cfg!(feature = "wgpu"),
         }
     }
 
-    /// The backend's CPU device without gradients, or why this build has none.
+    /// The backend's device without gradients, or why this build has none.
+    #[allow(deprecated)] // burn 0.22 deprecates burn-tch in favour of its CubeCL backends
     pub fn device(self) -> Result<Device, String> {
         match self {
             Self::Flex => Ok(Device::flex()),
             #[cfg(feature = "tch")]
-            #[allow(deprecated)] // burn 0.22 deprecates burn-tch in favour of CubeCL backends
             Self::Tch => Ok(Device::libtorch()),
+            #[cfg(feature = "tch")]
+            Self::TchCuda => Ok(Device::libtorch_cuda(0)),
             #[cfg(not(feature = "tch"))]
-            Self::Tch => Err("backend tch is not compiled in: build with `--features tch` (LibTorch from a PyTorch 2.9.0 venv: run tools/install_libtorch.sh, see docs/training-tch.md)".into()),
+            Self::Tch | Self::TchCuda => Err(not_compiled(self.name(), "tch", "LibTorch from a PyTorch 2.9.0 venv: run tools/install_libtorch.sh")),
+            #[cfg(feature = "cuda")]
+            Self::Cuda => Ok(Device::cuda(0)),
+            #[cfg(not(feature = "cuda"))]
+            Self::Cuda => Err(not_compiled("cuda", "cuda", "burn's CUDA backend; needs the CUDA toolkit at run time")),
+            #[cfg(feature = "wgpu")]
+            Self::Wgpu => Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice)),
+            #[cfg(not(feature = "wgpu"))]
+            Self::Wgpu => Err(not_compiled("wgpu", "wgpu", "burn's wgpu backend: Vulkan, Metal or DX12")),
         }
     }
 
-    /// The backend's CPU device with autodiff, for training.
+    /// The backend's device with autodiff, for training.
     pub fn training_device(self) -> Result<Device, String> {
         self.device().map(Device::autodiff)
     }

@@ -131,16 +131,17 @@ pub struct TrainArgs {
     pub max_train_shots: Option<usize>,
     #[arg(short, long)]
     pub quiet: bool,
-    /// Backend of the training steps: flex (pure Rust, always built) or tch (LibTorch on the
-    /// CPU; needs a build with `--features tch`, see docs/training-tch.md). Same model code and
-    /// weight files on both.
+    /// Backend of the training steps: flex (pure Rust, CPU; always built), tch (LibTorch on the
+    /// CPU) or tch-cuda (LibTorch on CUDA GPU 0), both with `--features tch`; cuda (burn's CUDA
+    /// backend, `--features cuda`) or wgpu (`--features wgpu`). See docs/training-tch.md. Same
+    /// model code and weight files on all.
     #[arg(long, default_value = "flex", value_parser = denoiser::Backend::NAMES)]
     pub backend: String,
 }
 
 /// The `--backend` choice, or an error naming the cargo feature a missing backend needs.
 fn backend(a: &TrainArgs) -> Result<denoiser::Backend> {
-    let b = denoiser::Backend::parse(&a.backend).with_context(|| format!("--backend {}: expected flex or tch", a.backend))?;
+    let b = denoiser::Backend::parse(&a.backend).with_context(|| format!("--backend {}: expected one of {}", a.backend, denoiser::Backend::NAMES.join(", ")))?;
     b.device().map_err(|e| anyhow::anyhow!("--backend {}: {e}", a.backend))?;
     Ok(b)
 }
