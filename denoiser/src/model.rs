@@ -8,7 +8,7 @@ use burn::tensor::{Device, Tensor};
 use crate::column::Column;
 use crate::ensemble::EnsembleConfig;
 use crate::kpcn::{KpcnConfig, Variant};
-use crate::mskp::{MsKpConfig, ScaleCompositor};
+use crate::mskp::{GuideGroup, MsKpConfig, ScaleCompositor};
 use crate::pathnet::PathNetConfig;
 
 /// Sizes of every network of one branch (both branches use the same sizes).
@@ -100,17 +100,28 @@ impl DenoiserConfig {
         c
     }
 
+    /// `default` with kernels at all five levels and edge-stopping kernels (guided by colour,
+    /// normal, depth and albedo in D_G, colour and f_P in D_P; [`crate::mskp`]): the convex blend,
+    /// so clear of the swap's patent.
+    pub fn edge() -> Self {
+        let mut c = Self::cpu_default();
+        c.mskp = c.mskp.map(|m| m.with_kernel_scales(5).with_edge_stopping(true));
+        c
+    }
+
     /// Preset names, for help texts and errors.
-    pub const PRESETS: [&'static str; 6] = ["default", "half", "swap", "kpcn", "paper-half", "paper"];
+    pub const PRESETS: [&'static str; 7] = ["default", "half", "swap", "edge", "kpcn", "paper-half", "paper"];
 
     /// `default` (multi-scale U-Net columns), `half` (of default), `swap` (default with the
-    /// patented low-band-swap compositor at five scales, opt-in), `kpcn` (the CPU-sized KPCN),
+    /// patented low-band-swap compositor at five scales, opt-in), `edge` (five scales,
+    /// edge-stopping kernels), `kpcn` (the CPU-sized KPCN),
     /// `paper-half` or `paper`.
     pub fn preset(name: &str) -> Option<Self> {
         match name {
             "default" => Some(Self::cpu_default()),
             "half" => Some(Self::half()),
             "swap" => Some(Self::swap()),
+            "edge" => Some(Self::edge()),
             "kpcn" => Some(Self::kpcn_cpu()),
             "paper-half" => Some(Self::paper_half()),
             "paper" => Some(Self::paper()),
@@ -138,10 +149,31 @@ impl DenoiserConfig {
     pub fn mskp_for(&self, v: Variant) -> Option<MsKpConfig> {
         self.mskp.clone().map(|mut c| {
             c.in_channels = v.in_channels();
+            if c.edge_stopping {
+                c.guides = edge_guides(v);
+            }
             c
         })
     }
+}
 
+/// The edge-stopping guides of a column's input (channel offsets of kpcn::channels): the
+/// colour it filters as log(1 + c), then what the variant adds: normal, depth (×20: it is path
+/// length over 10 scene radii, so neighbours differ by hundredths) and albedo for G; the path
+/// features f_P for P.
+fn edge_guides(v: Variant) -> Vec<GuideGroup> {
+    use crate::kpcn::channels::*;
+    let colour = GuideGroup::new(0, 3, 1.0, true);
+    let g = COLOUR_BLOCK;
+    let g_block = [GuideGroup::new(g, 3, 1.0, false), GuideGroup::new(g + 10, 1, 20.0, false), GuideGroup::new(g + G_ALBEDO, 3, 1.0, false)];
+    match v {
+        Variant::G => [colour].into_iter().chain(g_block).collect(),
+        Variant::P => vec![colour, GuideGroup::new(COLOUR_BLOCK, P_FEATURES, 1.0, false)],
+        Variant::GP => [colour].into_iter().chain(g_block).chain([GuideGroup::new(COLOUR_BLOCK + G_BLOCK + 1, P_FEATURES, 1.0, false)]).collect(),
+    }
+}
+
+impl DenoiserConfig {
     /// A fresh column of `variant` (deterministic in `seed`).
     pub fn init_column(&self, v: Variant, seed: u64, device: &Device) -> Column {
         match self.mskp_for(v) {

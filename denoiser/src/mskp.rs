@@ -22,6 +22,14 @@
 //! `swap` preset, kernels at all 5 levels) until the project decides it may ship it; the
 //! measured difference is in docs/denoiser.md ("The swap models").
 //!
+//! Edge stopping (`edge_stopping`, the `edge` preset): a softmax kernel predicted by the U-Net
+//! alone leaked 5–25 % of a bright neighbour across silhouettes and around emitters even on a
+//! 1024-spp input (docs/denoiser.md, "Error floors"). With guide groups (colour as log(1+c),
+//! normal, depth, albedo for D_G; colour and f_P for D_P) every tap's logit is lowered by
+//! Σ_g w_g·‖s_g·(g(q) − g(p))‖², with per-pixel strengths w_g = exp(·) predicted by the same
+//! head: the cross-bilateral weighting of Kalantari et al. 2015 (method.md §12) inside a learned
+//! kernel. The centre tap's distance is 0, so the identity stays in reach.
+//!
 //! Borders: each level is reflect-padded before filtering, so the kernels never read zeros and the
 //! image edge is not darkened (the KPCN's ⚠ of docs/method.md §3). The network output is cropped
 //! by `margin` per side like the KPCN's, so training and tiled inference treat both columns alike.
@@ -29,8 +37,8 @@
 use burn::config::Config;
 use burn::module::Module;
 use burn::tensor::activation::{relu, sigmoid};
-use burn::tensor::module::{avg_pool2d, interpolate, max_pool2d};
-use burn::tensor::ops::{AvgPoolOptions, InterpolateMode, InterpolateOptions, MaxPoolOptions, PadMode};
+use burn::tensor::module::{avg_pool2d, interpolate, max_pool2d, unfold4d};
+use burn::tensor::ops::{AvgPoolOptions, InterpolateMode, InterpolateOptions, MaxPoolOptions, PadMode, UnfoldOptions};
 use burn::tensor::{Device, Tensor};
 
 use crate::kernel::apply_kernel;
@@ -61,6 +69,29 @@ pub struct MsKpConfig {
     /// preset uses the swap, which is covered by US patent 10,699,382 (docs/method.md §12).
     #[config(default = "ScaleCompositor::ConvexBlend")]
     pub compositor: ScaleCompositor,
+    /// Edge-stopping kernels: the column's guide groups are filled in by
+    /// `DenoiserConfig::mskp_for` from its input variant. Files without the field have none.
+    #[config(default = false)]
+    pub edge_stopping: bool,
+    /// The guide groups this column's kernels stop at (empty: plain softmax kernels).
+    #[config(default = "Vec::new()")]
+    pub guides: Vec<GuideGroup>,
+}
+
+/// Input channels `start..start + len` used as an edge-stopping guide, multiplied by `scale`
+/// (after log(1 + max(c, 0)) when `log`) before distances are taken.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GuideGroup {
+    pub start: usize,
+    pub len: usize,
+    pub scale: f64,
+    pub log: bool,
+}
+
+impl GuideGroup {
+    pub fn new(start: usize, len: usize, scale: f64, log: bool) -> Self {
+        GuideGroup { start, len, scale, log }
+    }
 }
 
 /// The coarse-to-fine composite of [`MsKpNet::composite`].
@@ -80,10 +111,10 @@ impl MsKpConfig {
         self.widths.len()
     }
 
-    /// Output channels of the head at scale `s`: k² kernel logits, plus the blend logit α_s
-    /// except at the coarsest kernel scale.
+    /// Output channels of the head at scale `s`: k² kernel logits, the blend logit α_s except at
+    /// the coarsest kernel scale, then one edge-stopping strength per guide group.
     fn head_channels(&self, s: usize) -> usize {
-        self.filter_size * self.filter_size + usize::from(s + 1 < self.kernel_scales)
+        self.filter_size * self.filter_size + usize::from(s + 1 < self.kernel_scales) + self.guides.len()
     }
 
     /// Multiply-accumulates per output pixel (levels weighted by their area, filter taps
@@ -102,7 +133,8 @@ impl MsKpConfig {
             }
             if l < self.kernel_scales {
                 let taps = (self.filter_size * self.filter_size) as u64;
-                total += (conv_macs(w[l], self.head_channels(l), 1) + 3 * taps) as f64 / area;
+                let guide_channels: u64 = self.guides.iter().map(|g| g.len as u64 + 1).sum();
+                total += (conv_macs(w[l], self.head_channels(l), 1) + (3 + guide_channels) * taps) as f64 / area;
             }
         }
         total as u64
@@ -146,6 +178,9 @@ impl MsKpConfig {
             self.levels()
         );
         assert!(self.filter_size % 2 == 1, "filter size must be odd");
+        for g in &self.guides {
+            assert!(g.len > 0 && g.start + g.len <= self.in_channels, "guide channels {}..{} outside the {} inputs", g.start, g.start + g.len, self.in_channels);
+        }
         let hidden = Init::XavierUniform { gain: std::f64::consts::SQRT_2 };
         let block = |cin: usize, cout: usize, tag: u64| {
             let mut widths = vec![cin];
@@ -171,6 +206,7 @@ impl MsKpConfig {
                 .collect(),
             margin: self.margin,
             low_pass_swap: self.compositor == ScaleCompositor::LowPassSwap,
+            guides: self.guides.clone(),
         }
     }
 }
@@ -185,6 +221,17 @@ pub struct MsKpNet {
     pub margin: usize,
     /// [`ScaleCompositor::LowPassSwap`] (else the convex blend); set from the config.
     pub low_pass_swap: bool,
+    /// Edge-stopping guide groups (from the config).
+    #[module(skip)]
+    pub guides: Vec<GuideGroup>,
+}
+
+/// One scale's head outputs: kernel logits `[B, k², h, w]`, the blend logit `[B, 1, h, w]`
+/// (all but the coarsest scale) and the guide strengths' logs `[B, G, h, w]` (G guide groups).
+pub struct HeadOutput {
+    pub logits: Tensor<4>,
+    pub alpha: Option<Tensor<4>>,
+    pub guide_strength: Option<Tensor<4>>,
 }
 
 /// 2×2 box average (floors odd sizes, like the U-Net's pooling).
@@ -204,9 +251,37 @@ pub fn apply_kernel_reflect(colour: Tensor<4>, logits: Tensor<4>) -> Tensor<4> {
     if r == 0 {
         return apply_kernel(colour, logits);
     }
-    let [_, _, h, w] = colour.dims();
+    apply_kernel(pad_reflect(colour, r), logits)
+}
+
+/// Reflect padding by `r` (edge replication where the level is too small to mirror), as the
+/// colour gets before filtering.
+fn pad_reflect(x: Tensor<4>, r: usize) -> Tensor<4> {
+    let [_, _, h, w] = x.dims();
     let mode = if h > r && w > r { PadMode::Reflect } else { PadMode::Edge };
-    apply_kernel(colour.pad([(r, r), (r, r)], mode), logits)
+    x.pad([(r, r), (r, r)], mode)
+}
+
+/// Σ_c (g_c(q) − g_c(p))² for every tap q of the k×k window around each pixel p:
+/// `[B, C, H, W]` → `[B, k², H, W]`, taps in the kernel map's order.
+pub fn tap_distances(g: Tensor<4>, k: usize) -> Tensor<4> {
+    let [b, c, h, w] = g.dims();
+    let cols = unfold4d(pad_reflect(g.clone(), k / 2), [k, k], UnfoldOptions::new([1, 1], [0, 0], [1, 1]));
+    let cols = cols.reshape([b, c, k * k, h * w]);
+    (cols - g.reshape([b, c, 1, h * w])).square().sum_dim(1).reshape([b, k * k, h, w])
+}
+
+/// The guide groups' features, scaled (and log-compressed where asked): `[B, ΣC_g, H, W]` per
+/// group, in the group order.
+fn guide_features(input: &Tensor<4>, guides: &[GuideGroup]) -> Vec<Tensor<4>> {
+    guides
+        .iter()
+        .map(|g| {
+            let x = input.clone().narrow(1, g.start, g.len);
+            let x = if g.log { x.clamp_min(0.0).log1p() } else { x };
+            x.mul_scalar(g.scale)
+        })
+        .collect()
 }
 
 impl MsKpNet {
@@ -239,37 +314,49 @@ impl MsKpNet {
         out.into_iter().map(|f| f.expect("a decoder level per kernel scale")).collect()
     }
 
-    /// Head outputs per scale, finest first: (kernel logits `[B, k², ·, ·]`, blend logit
-    /// `[B, 1, ·, ·]` except at the coarsest scale).
-    pub fn heads(&self, x: Tensor<4>) -> Vec<(Tensor<4>, Option<Tensor<4>>)> {
+    /// Head outputs per scale, finest first.
+    pub fn heads(&self, x: Tensor<4>) -> Vec<HeadOutput> {
         let scales = self.heads.len();
+        let guides = self.guides.len();
         self.features(x)
             .into_iter()
             .zip(&self.heads)
             .enumerate()
             .map(|(s, (f, head))| {
                 let o = head.forward(f);
-                let c = o.dims()[1];
+                let c = o.dims()[1] - guides;
+                let guide_strength = (guides > 0).then(|| o.clone().narrow(1, c, guides));
                 if s + 1 < scales {
-                    (o.clone().narrow(1, 0, c - 1), Some(o.narrow(1, c - 1, 1)))
+                    HeadOutput { logits: o.clone().narrow(1, 0, c - 1), alpha: Some(o.narrow(1, c - 1, 1)), guide_strength }
                 } else {
-                    (o, None)
+                    HeadOutput { logits: o.narrow(1, 0, c), alpha: None, guide_strength }
                 }
             })
             .collect()
     }
 
     /// Filters and composites the colour `[B, 3, H, W]` with the head outputs; full size.
-    pub fn composite(colour: Tensor<4>, heads: Vec<(Tensor<4>, Option<Tensor<4>>)>, low_pass_swap: bool) -> Tensor<4> {
-        let mut pyramid = vec![colour];
+    /// `guides` are the guide groups' features at full size (empty without edge stopping).
+    pub fn composite(colour: Tensor<4>, guides: Vec<Tensor<4>>, heads: Vec<HeadOutput>, low_pass_swap: bool) -> Tensor<4> {
+        let mut pyramid = vec![(colour, guides)];
         for _ in 1..heads.len() {
-            let next = box_down(pyramid.last().unwrap().clone());
+            let (c, g) = pyramid.last().unwrap();
+            let next = (box_down(c.clone()), g.iter().map(|g| box_down(g.clone())).collect());
             pyramid.push(next);
         }
         let mut out: Option<Tensor<4>> = None;
-        for (c, (logits, alpha)) in pyramid.into_iter().zip(heads).rev() {
+        for ((c, g), head) in pyramid.into_iter().zip(heads).rev() {
+            let mut logits = head.logits;
+            if let Some(strength) = head.guide_strength {
+                let k = crate::kernel::filter_size(logits.dims()[1]);
+                // Bounded so that exp stays finite; e^±12 spans any useful strength.
+                let strength = strength.clamp(-12.0, 12.0).exp();
+                for (i, g) in g.into_iter().enumerate() {
+                    logits = logits - tap_distances(g, k) * strength.clone().narrow(1, i, 1);
+                }
+            }
             let f = apply_kernel_reflect(c, logits);
-            out = Some(match (out, alpha) {
+            out = Some(match (out, head.alpha) {
                 (Some(coarse), Some(a)) => {
                     let [_, _, h, w] = f.dims();
                     // Vogels et al.'s scale compositor: α swaps only the fine level's own
@@ -289,7 +376,8 @@ impl MsKpNet {
     pub fn forward(&self, input: Tensor<4>) -> Tensor<4> {
         let [_, _, h, w] = input.dims();
         let heads = self.heads(input.clone());
-        let out = Self::composite(input.narrow(1, 0, 3), heads, self.low_pass_swap);
+        let guides = guide_features(&input, &self.guides);
+        let out = Self::composite(input.narrow(1, 0, 3), guides, heads, self.low_pass_swap);
         center_crop(out, h - 2 * self.margin, w - 2 * self.margin)
     }
 }
@@ -325,8 +413,18 @@ mod tests {
     /// rule or a missed path is O(1).
     #[test]
     fn gradients_match_finite_differences() {
+        gradients_match_finite_differences_for(tiny(5));
+    }
+
+    /// The same check with edge-stopping guides (the strengths and the tap distances are on the
+    /// gradient path of the kernel logits).
+    #[test]
+    fn edge_stopping_gradients_match_finite_differences() {
+        gradients_match_finite_differences_for(tiny(5).with_guides(vec![GuideGroup::new(0, 3, 1.0, false), GuideGroup::new(3, 2, 2.0, false)]));
+    }
+
+    fn gradients_match_finite_differences_for(cfg: MsKpConfig) {
         let dev = cpu_training_device();
-        let cfg = tiny(5);
         let net = cfg.init(3, &dev);
         let mut rng = SplitMix64::new(17);
         let dims = [1, 5, 8, 8];
@@ -474,6 +572,50 @@ mod tests {
             }
         }
         assert!(worst < 1e-5, "identity kernels with α = 1 changed the input by {worst}");
+    }
+
+    /// Box kernels (all logits 0) and no coarse levels (α → 0) blur a step edge; with a guide
+    /// channel that steps where the colour does and a strong edge-stopping strength, every tap
+    /// across the step is cut and the output is the input on both sides. The strength's sign
+    /// flips the outcome, so the test can fail.
+    #[test]
+    fn edge_stopping_keeps_a_guided_step_edge() {
+        let d = cpu_device();
+        let cfg = tiny(4).with_guides(vec![GuideGroup::new(3, 1, 1.0, false)]);
+        let dims = [1, 4, 16, 16];
+        let side = |i: usize| (i % 16) < 7;
+        let x: Vec<f64> = (0..dims.iter().product())
+            .map(|i| if i / 256 == 3 { f64::from(u8::from(side(i))) } else if side(i) { 0.02 } else { 1.0 })
+            .collect();
+        for (strength, expect_sharp) in [(12.0f32, true), (-12.0, false)] {
+            let mut net = cfg.init(1, &d);
+            for s in 0..cfg.kernel_scales {
+                let n = cfg.head_channels(s);
+                let c = net.heads[s].weight.dims()[1];
+                let mut bias = vec![0.0f32; n];
+                if s + 1 < cfg.kernel_scales {
+                    bias[9] = -60.0; // α = 0
+                }
+                bias[n - 1] = strength;
+                net.heads[s].weight = burn::module::Param::from_tensor(Tensor::zeros([n, c, 1, 1], &d));
+                net.heads[s].bias = burn::module::Param::from_tensor(Tensor::from_data(burn::tensor::TensorData::new(bias, [n]), &d));
+            }
+            let out = to_vec(net.forward(tensor(&x, dims, &d)));
+            let (m, o) = (cfg.margin, 16 - 2 * cfg.margin);
+            let mut worst = 0.0f64;
+            for c in 0..3 {
+                for y in 0..o {
+                    for xx in 0..o {
+                        worst = worst.max((out[(c * o + y) * o + xx] - x[(c * 16 + y + m) * 16 + xx + m]).abs());
+                    }
+                }
+            }
+            if expect_sharp {
+                assert!(worst < 1e-5, "edge-stopped box kernels moved the edge by {worst}");
+            } else {
+                assert!(worst > 0.1, "plain box kernels should blur the edge ({worst})");
+            }
+        }
     }
 
     #[test]

@@ -9,7 +9,7 @@ use denoiser::method::Method;
 use denoiser::model::DenoiserConfig;
 use denoiser::train::data::{Dataset, LoadOptions};
 use denoiser::train::patches::Sampling;
-use denoiser::train::schedule::{self, Ablation, LrShape, ScheduleOptions};
+use denoiser::train::schedule::{self, Ablation, FinetuneLoss, LrShape, ScheduleOptions};
 use denoiser::train::{self as tr, Event, TrainOptions};
 use denoiser::weights::{self, Provenance};
 use std::collections::BTreeMap;
@@ -94,6 +94,12 @@ pub struct TrainArgs {
     pub lr_branches: Option<f64>,
     #[arg(long)]
     pub lr_finetune: Option<f64>,
+    /// Loss of the finetune stage: linear (the paper's L1 on radiance), tonemapped (L1 after
+    /// the evaluation's tone map) or relative (that L1 divided by the tone-mapped reference + 0.01,
+    /// weighing pixels as the test relMSE does) [default: tonemapped for the U-Net presets,
+    /// linear for KPCN ones].
+    #[arg(long, value_parser = FinetuneLoss::NAMES)]
+    pub finetune_loss: Option<String>,
     /// Learning rate of E in the joint stage.
     #[arg(long)]
     pub lr_joint_e: Option<f64>,
@@ -167,6 +173,9 @@ fn schedule_options(a: &TrainArgs, config: &DenoiserConfig) -> ScheduleOptions {
     setf(&mut o.lr_joint_e, a.lr_joint_e);
     setf(&mut o.lr_joint_rest, a.lr_joint_rest);
     setf(&mut o.lr_scratch, a.lr_scratch);
+    if let Some(l) = a.finetune_loss.as_deref().and_then(FinetuneLoss::parse) {
+        o.finetune_loss = l;
+    }
     o.lr_shape = if a.lr_schedule == "constant" { LrShape::Constant } else { LrShape::WarmupCosine { warmup: a.warmup } };
     o
 }

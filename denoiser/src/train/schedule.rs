@@ -16,6 +16,9 @@ pub enum StageKind {
     /// pixel borrow its lit neighbour's light at almost no cost, while the test relMSE counts
     /// that as a large relative error (docs/denoiser.md, "Error floors").
     FinetuneToneMapped,
+    /// Relative L1 on the recombined radiance after the evaluation's tone map
+    /// ([`crate::loss::rel_l1_tonemapped`]): weighs each pixel's error as the test relMSE does.
+    FinetuneRelative,
     /// Guided: per-branch L1 on I_E + w_path·L_path, E and the rest at their own rates.
     Joint,
 }
@@ -26,6 +29,7 @@ impl StageKind {
             StageKind::Branches => "branches",
             StageKind::Finetune => "finetune",
             StageKind::FinetuneToneMapped => "finetune-tonemapped",
+            StageKind::FinetuneRelative => "finetune-relative",
             StageKind::Joint => "joint",
         }
     }
@@ -104,6 +108,34 @@ impl Ablation {
     }
 }
 
+/// The loss of the finetune stage (on the recombined radiance).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum FinetuneLoss {
+    /// The paper's L1 on linear radiance.
+    #[default]
+    Linear,
+    /// L1 after the evaluation's tone map.
+    ToneMapped,
+    /// Relative L1 after the evaluation's tone map.
+    Relative,
+}
+
+impl FinetuneLoss {
+    pub const NAMES: [&'static str; 3] = ["linear", "tonemapped", "relative"];
+
+    pub fn parse(s: &str) -> Option<Self> {
+        [FinetuneLoss::Linear, FinetuneLoss::ToneMapped, FinetuneLoss::Relative].into_iter().zip(Self::NAMES).find(|(_, n)| *n == s).map(|(l, _)| l)
+    }
+
+    pub fn stage_kind(self) -> StageKind {
+        match self {
+            FinetuneLoss::Linear => StageKind::Finetune,
+            FinetuneLoss::ToneMapped => StageKind::FinetuneToneMapped,
+            FinetuneLoss::Relative => StageKind::FinetuneRelative,
+        }
+    }
+}
+
 /// Stage lengths and learning rates (defaults: method.md §3, §6.2 rates; CPU-sized lengths).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ScheduleOptions {
@@ -121,9 +153,9 @@ pub struct ScheduleOptions {
     pub lr_scratch: f64,
     pub w_path: f64,
     pub lr_shape: LrShape,
-    /// Finetune with [`StageKind::FinetuneToneMapped`] instead of the paper's linear L1.
+    /// The finetune stage's loss.
     #[serde(default)]
-    pub finetune_tonemapped: bool,
+    pub finetune_loss: FinetuneLoss,
 }
 
 impl Default for ScheduleOptions {
@@ -141,7 +173,7 @@ impl Default for ScheduleOptions {
             lr_scratch: 1e-4,
             w_path: 0.1,
             lr_shape: LrShape::WarmupCosine { warmup: 0.05 },
-            finetune_tonemapped: false,
+            finetune_loss: FinetuneLoss::Linear,
         }
     }
 }
@@ -164,7 +196,7 @@ impl ScheduleOptions {
             lr_joint_e: peak / 2.0,
             lr_joint_rest: peak / 20.0,
             lr_finetune: peak / 5.0,
-            finetune_tonemapped: true,
+            finetune_loss: FinetuneLoss::ToneMapped,
             ..d
         }
     }
@@ -187,7 +219,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
         (m, _) => vec![
             Stage { kind: StageKind::Branches, steps: o.branch_steps, lr_rest: Some(o.lr_branches), lr_e: None, w_path: path(m), shape: o.lr_shape },
             Stage {
-                kind: if o.finetune_tonemapped { StageKind::FinetuneToneMapped } else { StageKind::Finetune },
+                kind: o.finetune_loss.stage_kind(),
                 steps: o.finetune_steps, lr_rest: Some(o.lr_finetune), lr_e: None, w_path: 0.0, shape: o.lr_shape },
         ],
     }
