@@ -26,7 +26,7 @@
 //! alone leaked 5–25 % of a bright neighbour across silhouettes and around emitters even on a
 //! 1024-spp input (docs/denoiser.md, "Error floors"). With guide groups (colour as log(1+c),
 //! normal, depth, albedo for D_G; colour and f_P for D_P) every tap's logit is lowered by
-//! Σ_g w_g·‖s_g·(g(q) − g(p))‖², with per-pixel strengths w_g = exp(·) predicted by the same
+//! Σ_g w_g·‖s_g·(g(q) − g(p))‖² (for the colour only where q is brighter), with per-pixel strengths w_g = exp(·) predicted by the same
 //! head: the cross-bilateral weighting of Kalantari et al. 2015 (method.md §12) inside a learned
 //! kernel. The centre tap's distance is 0, so the identity stays in reach.
 //!
@@ -79,18 +79,27 @@ pub struct MsKpConfig {
 }
 
 /// Input channels `start..start + len` used as an edge-stopping guide, multiplied by `scale`
-/// (after log(1 + max(c, 0)) when `log`) before distances are taken.
+/// (after log(1 + max(c, 0)) when `log`) before distances are taken. A `brighter_only` guide
+/// counts only how much a tap exceeds the centre, Σ max(g(q) − g(p), 0)²: on the noisy colour a
+/// symmetric distance would keep every firefly (its neighbours all look far from it), while this
+/// one only stops light from flowing in from brighter taps, fireflies included.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GuideGroup {
     pub start: usize,
     pub len: usize,
     pub scale: f64,
     pub log: bool,
+    #[serde(default)]
+    pub brighter_only: bool,
 }
 
 impl GuideGroup {
     pub fn new(start: usize, len: usize, scale: f64, log: bool) -> Self {
-        GuideGroup { start, len, scale, log }
+        GuideGroup { start, len, scale, log, brighter_only: false }
+    }
+
+    pub fn brighter_only(self) -> Self {
+        GuideGroup { brighter_only: true, ..self }
     }
 }
 
@@ -262,24 +271,27 @@ fn pad_reflect(x: Tensor<4>, r: usize) -> Tensor<4> {
     x.pad([(r, r), (r, r)], mode)
 }
 
-/// Σ_c (g_c(q) − g_c(p))² for every tap q of the k×k window around each pixel p:
-/// `[B, C, H, W]` → `[B, k², H, W]`, taps in the kernel map's order.
-pub fn tap_distances(g: Tensor<4>, k: usize) -> Tensor<4> {
+/// Σ_c (g_c(q) − g_c(p))² for every tap q of the k×k window around each pixel p (only the
+/// positive differences if `brighter_only`): `[B, C, H, W]` → `[B, k², H, W]`, taps in the
+/// kernel map's order.
+pub fn tap_distances(g: Tensor<4>, k: usize, brighter_only: bool) -> Tensor<4> {
     let [b, c, h, w] = g.dims();
     let cols = unfold4d(pad_reflect(g.clone(), k / 2), [k, k], UnfoldOptions::new([1, 1], [0, 0], [1, 1]));
     let cols = cols.reshape([b, c, k * k, h * w]);
-    (cols - g.reshape([b, c, 1, h * w])).square().sum_dim(1).reshape([b, k * k, h, w])
+    let diff = cols - g.reshape([b, c, 1, h * w]);
+    let diff = if brighter_only { diff.clamp_min(0.0) } else { diff };
+    diff.square().sum_dim(1).reshape([b, k * k, h, w])
 }
 
-/// The guide groups' features, scaled (and log-compressed where asked): `[B, ΣC_g, H, W]` per
-/// group, in the group order.
-fn guide_features(input: &Tensor<4>, guides: &[GuideGroup]) -> Vec<Tensor<4>> {
+/// The guide groups' features, scaled (and log-compressed where asked), `[B, C_g, H, W]`, with
+/// their `brighter_only` flags, in the group order.
+fn guide_features(input: &Tensor<4>, guides: &[GuideGroup]) -> Vec<(Tensor<4>, bool)> {
     guides
         .iter()
         .map(|g| {
             let x = input.clone().narrow(1, g.start, g.len);
             let x = if g.log { x.clamp_min(0.0).log1p() } else { x };
-            x.mul_scalar(g.scale)
+            (x.mul_scalar(g.scale), g.brighter_only)
         })
         .collect()
 }
@@ -337,11 +349,11 @@ impl MsKpNet {
 
     /// Filters and composites the colour `[B, 3, H, W]` with the head outputs; full size.
     /// `guides` are the guide groups' features at full size (empty without edge stopping).
-    pub fn composite(colour: Tensor<4>, guides: Vec<Tensor<4>>, heads: Vec<HeadOutput>, low_pass_swap: bool) -> Tensor<4> {
+    pub fn composite(colour: Tensor<4>, guides: Vec<(Tensor<4>, bool)>, heads: Vec<HeadOutput>, low_pass_swap: bool) -> Tensor<4> {
         let mut pyramid = vec![(colour, guides)];
         for _ in 1..heads.len() {
             let (c, g) = pyramid.last().unwrap();
-            let next = (box_down(c.clone()), g.iter().map(|g| box_down(g.clone())).collect());
+            let next = (box_down(c.clone()), g.iter().map(|(g, one)| (box_down(g.clone()), *one)).collect());
             pyramid.push(next);
         }
         let mut out: Option<Tensor<4>> = None;
@@ -351,8 +363,8 @@ impl MsKpNet {
                 let k = crate::kernel::filter_size(logits.dims()[1]);
                 // Bounded so that exp stays finite; e^±12 spans any useful strength.
                 let strength = strength.clamp(-12.0, 12.0).exp();
-                for (i, g) in g.into_iter().enumerate() {
-                    logits = logits - tap_distances(g, k) * strength.clone().narrow(1, i, 1);
+                for (i, (g, brighter_only)) in g.into_iter().enumerate() {
+                    logits = logits - tap_distances(g, k, brighter_only) * strength.clone().narrow(1, i, 1);
                 }
             }
             let f = apply_kernel_reflect(c, logits);
@@ -420,7 +432,7 @@ mod tests {
     /// gradient path of the kernel logits).
     #[test]
     fn edge_stopping_gradients_match_finite_differences() {
-        gradients_match_finite_differences_for(tiny(5).with_guides(vec![GuideGroup::new(0, 3, 1.0, false), GuideGroup::new(3, 2, 2.0, false)]));
+        gradients_match_finite_differences_for(tiny(5).with_guides(vec![GuideGroup::new(0, 3, 1.0, false).brighter_only(), GuideGroup::new(3, 2, 2.0, false)]));
     }
 
     fn gradients_match_finite_differences_for(cfg: MsKpConfig) {

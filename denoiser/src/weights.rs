@@ -151,9 +151,12 @@ fn header(path: &Path, bytes: &[u8]) -> Result<(DenoiserConfig, Method, String, 
         return Err(bad(keys::FORMAT, format!("version {version}, this program reads {FORMAT_VERSION}")));
     }
     let mut config_json: serde_json::Value = serde_json::from_str(field(keys::CONFIG)?).map_err(|e| bad(keys::CONFIG, e.to_string()))?;
-    // U-Net files written before the compositor was recorded were trained with the convex blend.
+    // U-Net files written before the compositor was recorded were trained with the convex blend,
+    // and those written before edge stopping existed have plain softmax kernels.
     if let Some(mskp) = config_json.get_mut("mskp").and_then(|v| v.as_object_mut()) {
         mskp.entry("compositor").or_insert_with(|| serde_json::json!(ScaleCompositor::ConvexBlend));
+        mskp.entry("edge_stopping").or_insert(serde_json::json!(false));
+        mskp.entry("guides").or_insert(serde_json::json!([]));
     }
     let config: DenoiserConfig = serde_json::from_value(config_json).map_err(|e| bad(keys::CONFIG, e.to_string()))?;
     check_config(&config).map_err(|e| bad(keys::CONFIG, e))?;

@@ -94,10 +94,9 @@ pub struct TrainArgs {
     pub lr_branches: Option<f64>,
     #[arg(long)]
     pub lr_finetune: Option<f64>,
-    /// Loss of the finetune stage: linear (the paper's L1 on radiance), tonemapped (L1 after
-    /// the evaluation's tone map) or relative (that L1 divided by the tone-mapped reference + 0.01,
-    /// weighing pixels as the test relMSE does) [default: tonemapped for the U-Net presets,
-    /// linear for KPCN ones].
+    /// Loss of the finetune stage: linear (the paper's L1 on radiance) or tonemapped (L1 after
+    /// the evaluation's tone map) [default: tonemapped for the U-Net presets, linear for KPCN
+    /// ones].
     #[arg(long, value_parser = FinetuneLoss::NAMES)]
     pub finetune_loss: Option<String>,
     /// Learning rate of E in the joint stage.

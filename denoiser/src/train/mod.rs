@@ -27,7 +27,7 @@ use burn::module::{Module, ModuleVisitor, ParamId};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor};
 
-use crate::loss::{l1, l1_tonemapped, path_disentangling_loss, rel_l1_tonemapped, rel_mse_val};
+use crate::loss::{l1, l1_tonemapped, path_disentangling_loss, rel_mse_val};
 use crate::method::{BranchNets, Method, MethodModel, MethodOutput};
 use crate::model::DenoiserConfig;
 use crate::preprocess::TargetTensors;
@@ -225,7 +225,6 @@ pub fn stage_loss(out: MethodOutput, t: &TargetTensors, stage: &Stage, rng: &mut
     match stage.kind {
         StageKind::Finetune => l1(out.radiance, t.total.clone()),
         StageKind::FinetuneToneMapped => l1_tonemapped(out.radiance, t.total.clone()),
-        StageKind::FinetuneRelative => rel_l1_tonemapped(out.radiance, t.total.clone()),
         StageKind::Branches | StageKind::Joint => {
             let mut loss = l1(out.diffuse.output, t.diffuse.clone()) + l1(out.specular.output, t.specular.clone());
             if stage.w_path > 0.0 {

@@ -16,9 +16,6 @@ pub enum StageKind {
     /// pixel borrow its lit neighbour's light at almost no cost, while the test relMSE counts
     /// that as a large relative error (docs/denoiser.md, "Error floors").
     FinetuneToneMapped,
-    /// Relative L1 on the recombined radiance after the evaluation's tone map
-    /// ([`crate::loss::rel_l1_tonemapped`]): weighs each pixel's error as the test relMSE does.
-    FinetuneRelative,
     /// Guided: per-branch L1 on I_E + w_path·L_path, E and the rest at their own rates.
     Joint,
 }
@@ -29,7 +26,6 @@ impl StageKind {
             StageKind::Branches => "branches",
             StageKind::Finetune => "finetune",
             StageKind::FinetuneToneMapped => "finetune-tonemapped",
-            StageKind::FinetuneRelative => "finetune-relative",
             StageKind::Joint => "joint",
         }
     }
@@ -116,22 +112,19 @@ pub enum FinetuneLoss {
     Linear,
     /// L1 after the evaluation's tone map.
     ToneMapped,
-    /// Relative L1 after the evaluation's tone map.
-    Relative,
 }
 
 impl FinetuneLoss {
-    pub const NAMES: [&'static str; 3] = ["linear", "tonemapped", "relative"];
+    pub const NAMES: [&'static str; 2] = ["linear", "tonemapped"];
 
     pub fn parse(s: &str) -> Option<Self> {
-        [FinetuneLoss::Linear, FinetuneLoss::ToneMapped, FinetuneLoss::Relative].into_iter().zip(Self::NAMES).find(|(_, n)| *n == s).map(|(l, _)| l)
+        [FinetuneLoss::Linear, FinetuneLoss::ToneMapped].into_iter().zip(Self::NAMES).find(|(_, n)| *n == s).map(|(l, _)| l)
     }
 
     pub fn stage_kind(self) -> StageKind {
         match self {
             FinetuneLoss::Linear => StageKind::Finetune,
             FinetuneLoss::ToneMapped => StageKind::FinetuneToneMapped,
-            FinetuneLoss::Relative => StageKind::FinetuneRelative,
         }
     }
 }
