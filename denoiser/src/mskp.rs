@@ -36,7 +36,7 @@
 
 use burn::config::Config;
 use burn::module::Module;
-use burn::tensor::activation::{relu, sigmoid};
+use burn::tensor::activation::{relu, sigmoid, softmax};
 use burn::tensor::module::{avg_pool2d, interpolate, max_pool2d, unfold4d};
 use burn::tensor::ops::{AvgPoolOptions, InterpolateMode, InterpolateOptions, MaxPoolOptions, PadMode, UnfoldOptions};
 use burn::tensor::{Device, Tensor};
@@ -296,6 +296,68 @@ fn guide_features(input: &Tensor<4>, guides: &[GuideGroup]) -> Vec<(Tensor<4>, b
         .collect()
 }
 
+/// Log of the bilinear (align-corners-false) weights of the 3×3 coarse neighbours of each pixel
+/// of a 2h×2w grid, `[1, 9, 2h, 2w]`, taps in unfold order; −1e4 where a weight is 0.
+fn bilinear_tap_logits(h: usize, w: usize, device: &Device) -> Tensor<4> {
+    // A fine pixel in the upper (left) half of its parent takes ¼ of the coarse row (column)
+    // above (left), ¾ of its own and none of the one below (right); mirrored for the other half.
+    let one_d = |sub: usize| if sub == 0 { [0.25f32, 0.75, 0.0] } else { [0.0, 0.75, 0.25] };
+    let (fh, fw) = (2 * h, 2 * w);
+    let mut v = vec![0f32; 9 * fh * fw];
+    for y in 0..fh {
+        for x in 0..fw {
+            let (wy, wx) = (one_d(y % 2), one_d(x % 2));
+            for i in 0..3 {
+                for j in 0..3 {
+                    let wt = wy[i] * wx[j];
+                    v[((i * 3 + j) * fh + y) * fw + x] = if wt > 0.0 { wt.ln() } else { -1e4 };
+                }
+            }
+        }
+    }
+    Tensor::<1>::from_data(burn::tensor::TensorData::new(v, [9 * fh * fw]), device).reshape([1, 9, fh, fw])
+}
+
+/// Edge-pads (or crops) the bottom/right of `x` to `h`×`w`.
+fn fit_to(x: Tensor<4>, h: usize, w: usize) -> Tensor<4> {
+    let [_, _, xh, xw] = x.dims();
+    let x = x.narrow(2, 0, xh.min(h)).narrow(3, 0, xw.min(w));
+    let (py, px) = (h.saturating_sub(xh), w.saturating_sub(xw));
+    if py > 0 || px > 0 {
+        x.pad([(0, py), (0, px)], PadMode::Edge)
+    } else {
+        x
+    }
+}
+
+/// The 3×3 windows of `x` `[B, C, h, w]` (reflect-padded), repeated onto the 2×2 fine pixels of
+/// each coarse one and edge-padded to `[B, C, 9, fh·fw]` (fh ∈ {2h, 2h + 1}: pooling floors).
+fn coarse_windows(x: Tensor<4>, fh: usize, fw: usize) -> Tensor<4> {
+    let [b, c, h, w] = x.dims();
+    let cols = unfold4d(pad_reflect(x, 1), [3, 3], UnfoldOptions::new([1, 1], [0, 0], [1, 1])).reshape([b, c * 9, h, w]);
+    let rep = interpolate(cols, InterpolateOptions::new(InterpolateMode::Nearest).with_output_size([2 * h, 2 * w]));
+    fit_to(rep, fh, fw).reshape([b, c, 9, fh * fw])
+}
+
+/// Joint-bilateral 2× upsampling (Kopf et al. 2007) of `coarse` `[B, 3, h, w]` to `fh`×`fw`:
+/// each fine pixel p averages its 3×3 coarse neighbours q with the bilinear weights times
+/// exp(−Σ_g s_g(p)·‖g(q) − g(p)‖²), renormalised, where g(q) are the coarse level's guides and
+/// g(p) this level's. Plain bilinear upsampling carried a quarter of a bright coarse pixel across
+/// every silhouette into the convex blend (docs/denoiser.md, "Error floors").
+fn joint_upsample(coarse: Tensor<4>, coarse_guides: &[(Tensor<4>, bool)], fine_guides: &[(Tensor<4>, bool)], strength: Tensor<4>, fh: usize, fw: usize) -> Tensor<4> {
+    let [b, c, h, w] = coarse.dims();
+    let mut logits = fit_to(bilinear_tap_logits(h, w, &coarse.device()), fh, fw).reshape([1, 9, fh * fw]);
+    for (i, ((cg, brighter_only), (fg, _))) in coarse_guides.iter().zip(fine_guides).enumerate() {
+        let gc = fg.dims()[1];
+        let diff = coarse_windows(cg.clone(), fh, fw) - fg.clone().reshape([b, gc, 1, fh * fw]);
+        let diff = if *brighter_only { diff.clamp_min(0.0) } else { diff };
+        let d = diff.square().sum_dim(1).reshape([b, 9, fh * fw]);
+        logits = logits - d * strength.clone().narrow(1, i, 1).reshape([b, 1, fh * fw]);
+    }
+    let wts = softmax(logits, 1).reshape([b, 1, 9, fh * fw]);
+    (coarse_windows(coarse, fh, fw) * wts).sum_dim(2).reshape([b, c, fh, fw])
+}
+
 impl MsKpNet {
     /// The decoder features at each kernel scale, finest first: `[B, widths[s], H/2^s, W/2^s]`.
     pub fn features(&self, x: Tensor<4>) -> Vec<Tensor<4>> {
@@ -357,29 +419,36 @@ impl MsKpNet {
             pyramid.push(next);
         }
         let mut out: Option<Tensor<4>> = None;
+        // The coarser level's guides, for the joint-bilateral upsampling into this one.
+        let mut coarse_guides: Option<Vec<(Tensor<4>, bool)>> = None;
         for ((c, g), head) in pyramid.into_iter().zip(heads).rev() {
             let mut logits = head.logits;
-            if let Some(strength) = head.guide_strength {
+            // Bounded so that exp stays finite; e^±12 spans any useful strength.
+            let strength = head.guide_strength.map(|s| s.clamp(-12.0, 12.0).exp());
+            if let Some(strength) = &strength {
                 let k = crate::kernel::filter_size(logits.dims()[1]);
-                // Bounded so that exp stays finite; e^±12 spans any useful strength.
-                let strength = strength.clamp(-12.0, 12.0).exp();
-                for (i, (g, brighter_only)) in g.into_iter().enumerate() {
-                    logits = logits - tap_distances(g, k, brighter_only) * strength.clone().narrow(1, i, 1);
+                for (i, (g, brighter_only)) in g.iter().enumerate() {
+                    logits = logits - tap_distances(g.clone(), k, *brighter_only) * strength.clone().narrow(1, i, 1);
                 }
             }
             let f = apply_kernel_reflect(c, logits);
+            let up = |x: Tensor<4>, h: usize, w: usize| match (&strength, &coarse_guides) {
+                (Some(s), Some(cg)) => joint_upsample(x, cg, &g, s.clone(), h, w),
+                _ => upsample_to(x, h, w),
+            };
             out = Some(match (out, head.alpha) {
                 (Some(coarse), Some(a)) => {
                     let [_, _, h, w] = f.dims();
                     // Vogels et al.'s scale compositor: α swaps only the fine level's own
                     // low-pass band for the coarse result, so the edges its kernel kept stay.
                     let a = sigmoid(a);
-                    let low = if low_pass_swap { upsample_to(box_down(f.clone()), h, w) } else { f.clone() };
-                    f + (upsample_to(coarse, h, w) - low) * a
+                    let low = if low_pass_swap { up(box_down(f.clone()), h, w) } else { f.clone() };
+                    f + (up(coarse, h, w) - low) * a
                 }
                 (None, _) => f,
                 (Some(_), None) => unreachable!("only the coarsest scale lacks a blend weight"),
             });
+            coarse_guides = Some(g);
         }
         out.expect("at least one kernel scale")
     }
@@ -432,7 +501,10 @@ mod tests {
     /// gradient path of the kernel logits).
     #[test]
     fn edge_stopping_gradients_match_finite_differences() {
-        gradients_match_finite_differences_for(tiny(5).with_guides(vec![GuideGroup::new(0, 3, 1.0, false).brighter_only(), GuideGroup::new(3, 2, 2.0, false)]));
+        for compositor in [ScaleCompositor::LowPassSwap, ScaleCompositor::ConvexBlend] {
+            let guides = vec![GuideGroup::new(0, 3, 1.0, false).brighter_only(), GuideGroup::new(3, 2, 2.0, false)];
+            gradients_match_finite_differences_for(tiny(5).with_compositor(compositor).with_guides(guides));
+        }
     }
 
     fn gradients_match_finite_differences_for(cfg: MsKpConfig) {
@@ -630,14 +702,62 @@ mod tests {
         }
     }
 
+    /// The convex blend at α = 1 with identity kernels returns the coarse levels, upsampled. A
+    /// step edge on the coarsest grid with a guide that steps with it comes back exactly when the
+    /// upsampling is joint-bilateral (each fine pixel takes only coarse pixels on its side), and
+    /// blurred when the strengths are off (plain bilinear weights), so the test can fail.
+    #[test]
+    fn joint_bilateral_upsampling_keeps_a_guided_edge_through_the_convex_blend() {
+        let d = cpu_device();
+        let cfg = tiny(4).with_compositor(ScaleCompositor::ConvexBlend).with_guides(vec![GuideGroup::new(3, 1, 1.0, false)]);
+        let dims = [1, 4, 16, 16];
+        let side = |i: usize| (i % 16) < 8;
+        let x: Vec<f64> = (0..dims.iter().product())
+            .map(|i| if i / 256 == 3 { f64::from(u8::from(side(i))) } else if side(i) { 0.02 } else { 1.0 })
+            .collect();
+        for (strength, expect_sharp) in [(12.0f32, true), (-12.0, false)] {
+            let mut net = cfg.init(1, &d);
+            for s in 0..cfg.kernel_scales {
+                let n = cfg.head_channels(s);
+                let c = net.heads[s].weight.dims()[1];
+                let mut bias = vec![-60.0f32; n];
+                bias[4] = 60.0; // identity kernel
+                if s + 1 < cfg.kernel_scales {
+                    bias[9] = 60.0; // α = 1
+                }
+                bias[n - 1] = strength;
+                net.heads[s].weight = burn::module::Param::from_tensor(Tensor::zeros([n, c, 1, 1], &d));
+                net.heads[s].bias = burn::module::Param::from_tensor(Tensor::from_data(burn::tensor::TensorData::new(bias, [n]), &d));
+            }
+            let out = to_vec(net.forward(tensor(&x, dims, &d)));
+            let (m, o) = (cfg.margin, 16 - 2 * cfg.margin);
+            let mut worst = 0.0f64;
+            for c in 0..3 {
+                for y in 0..o {
+                    for xx in 0..o {
+                        worst = worst.max((out[(c * o + y) * o + xx] - x[(c * 16 + y + m) * 16 + xx + m]).abs());
+                    }
+                }
+            }
+            if expect_sharp {
+                assert!(worst < 1e-4, "joint-bilateral upsampling moved the edge by {worst}");
+            } else {
+                assert!(worst > 0.1, "bilinear upsampling should blur the edge ({worst})");
+            }
+        }
+    }
+
     #[test]
     fn any_size_runs() {
         let d = cpu_device();
-        let net = tiny(3).init(2, &d);
-        for (h, w) in [(13, 9), (5, 7), (4, 4)] {
-            let out = net.forward(Tensor::<4>::ones([1, 3, h, w], &d));
-            assert_eq!(out.dims(), [1, 3, h - 2, w - 2]);
-            assert!(to_vec(out).iter().all(|v| (v - 1.0).abs() < 1e-5));
+        let guided = tiny(4).with_compositor(ScaleCompositor::ConvexBlend).with_guides(vec![GuideGroup::new(0, 3, 1.0, true).brighter_only(), GuideGroup::new(3, 1, 1.0, false)]);
+        for (cfg, c) in [(tiny(3), 3), (guided, 4)] {
+            let net = cfg.init(2, &d);
+            for (h, w) in [(13, 9), (5, 7), (4, 4)] {
+                let out = net.forward(Tensor::<4>::ones([1, c, h, w], &d));
+                assert_eq!(out.dims(), [1, 3, h - 2, w - 2]);
+                assert!(to_vec(out).iter().all(|v| (v - 1.0).abs() < 1e-5));
+            }
         }
     }
 }
