@@ -1,9 +1,10 @@
 //! Quick single-thread ray benchmark against Embree on the two `pixguide bench` meshes:
 //! `cargo run --release -p renderer --example bvh_quick [rays]`.
 
-use renderer::bench::{displaced_sphere, embree_python, embree_script, ray_bench, EmbreeSetup, RayBatch};
+use renderer::bench::{displaced_sphere, embree_script, ray_bench, EmbreeSetup, RayBatch};
 use renderer::scene::Scene;
 use std::path::Path;
+use tools_venv::embree_python;
 
 fn main() {
     let rays: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(500_000);

@@ -3,10 +3,11 @@
 //! Also compares obvhs build presets (build time vs rays/s) when PIXGUIDE_BENCH_PRESETS is set.
 
 use glam::Vec3;
-use renderer::bench::{displaced_sphere, embree_python, embree_script, ray_bench, trace, EmbreeSetup, RayBatch};
+use renderer::bench::{displaced_sphere, embree_script, ray_bench, trace, EmbreeSetup, RayBatch};
 use renderer::geometry::{Accel, Mesh};
 use std::path::Path;
 use std::time::Instant;
+use tools_venv::embree_python;
 
 fn load_obj(path: &Path) -> Mesh {
     let (models, _) = tobj::load_obj(path, &tobj::GPU_LOAD_OPTIONS).expect("obj loads");

@@ -6,9 +6,10 @@
 //! `target/embree-venv` and is reused. Without it the test fails (it is required in CI).
 
 use glam::Vec3;
-use renderer::bench::{embree_python, embree_script, embree_trace, trace, RayBatch};
+use renderer::bench::{embree_script, embree_trace, trace, RayBatch};
 use renderer::geometry::{Accel, Mesh};
 use std::path::{Path, PathBuf};
+use tools_venv::embree_python;
 
 fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("renderer/ has a parent").to_path_buf()

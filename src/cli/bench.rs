@@ -4,11 +4,12 @@
 use crate::alloc_stats;
 use anyhow::Result;
 use clap::Args;
-use renderer::bench::{displaced_sphere, embree_python, embree_script, ray_bench, EmbreeSetup, RayBatch};
+use renderer::bench::{displaced_sphere, embree_script, ray_bench, EmbreeSetup, RayBatch};
 use renderer::film::BufferRequest;
 use renderer::integrator::{self, RenderOptions};
 use renderer::scene::Scene;
 use std::path::{Path, PathBuf};
+use tools_venv::embree_python;
 
 #[derive(Args)]
 pub struct BenchArgs {
