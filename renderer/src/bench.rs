@@ -374,27 +374,63 @@ impl fmt::Display for RayBenchReport {
     }
 }
 
-/// A displaced UV sphere of 2·n·m triangles with long shared quad diagonals: the benchmark's
-/// large mesh (`displaced_sphere(230, 230)` has 105,800 triangles).
-pub fn displaced_sphere(n: u32, m: u32) -> Mesh {
+/// The triangles of an OBJ file as a bare mesh: positions only, every triangle with material 0,
+/// faces triangulated by tobj (its GPU load options). The shipped meshes of the ray benchmark
+/// and the Embree cross-check, without the scene loader's materials and transforms.
+pub fn obj_mesh(path: &Path) -> Result<Mesh> {
+    let (models, _) = tobj::load_obj(path, &tobj::GPU_LOAD_OPTIONS).map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
+    let mut mesh = Mesh::default();
+    for m in models {
+        let p: Vec<Vec3> = m.mesh.positions.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
+        let t: Vec<[u32; 3]> = m.mesh.indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        mesh.append(&p, &[], &[], &t, 0);
+    }
+    Ok(mesh)
+}
+
+/// Which of the two test meshes `displaced_sphere` builds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SphereStyle {
+    /// The benchmark's large mesh (`pixguide bench`, the examples): one displacement frequency,
+    /// centred on the origin, every quad split along the same diagonal, so long diagonals are
+    /// shared.
+    Bench,
+    /// The Embree cross-check's mesh: a second, finer ripple on top, moved off the origin, and
+    /// the quads split along alternating diagonals: many long, thin shared diagonals near the
+    /// poles.
+    CrossCheck,
+}
+
+/// A displaced sphere as a latitude/longitude grid of n × m quads: 2·n·m triangles
+/// (`displaced_sphere(230, 230, _)` has 105,800).
+pub fn displaced_sphere(n: u32, m: u32, style: SphereStyle) -> Mesh {
+    let cross_check = style == SphereStyle::CrossCheck;
     let mut positions = Vec::new();
     for j in 0..=n {
-        let th = std::f32::consts::PI * j as f32 / n as f32;
+        let theta = std::f32::consts::PI * j as f32 / n as f32;
         for i in 0..=m {
-            let ph = std::f32::consts::TAU * i as f32 / m as f32;
-            let r = 1.0 + 0.08 * (5.0 * th).sin() * (7.0 * ph).cos();
-            positions.push(Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin()) * r);
+            let phi = std::f32::consts::TAU * i as f32 / m as f32;
+            let mut r = 1.0 + 0.08 * (5.0 * theta).sin() * (7.0 * phi).cos();
+            if cross_check {
+                r += 0.02 * (23.0 * phi + 3.0 * theta).sin();
+            }
+            let p = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin()) * r;
+            positions.push(if cross_check { p + Vec3::new(0.3, -0.2, 0.1) } else { p });
         }
     }
     let idx = |i: u32, j: u32| j * (m + 1) + i;
     let mut tris = Vec::new();
     for j in 0..n {
         for i in 0..m {
-            tris.extend([[idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)], [idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]]);
+            let (a, b, c, d) = (idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1));
+            if cross_check && (i + j) % 2 == 1 {
+                tris.extend([[a, b, d], [b, c, d]]);
+            } else {
+                tris.extend([[a, b, c], [a, c, d]]);
+            }
         }
     }
     let mut mesh = Mesh::default();
     mesh.append(&positions, &[], &[], &tris, 0);
     mesh
 }
-
