@@ -104,7 +104,9 @@ impl RayBatch {
 fn interior_edges(mesh: &Mesh, eye: Vec3) -> Vec<(Vec3, Vec3)> {
     use std::collections::HashMap;
     let key = |p: Vec3| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
-    let mut map: HashMap<([u32; 3], [u32; 3]), Vec<(Vec3, Vec3, Vec3)>> = HashMap::new();
+    // Edge (its two vertices' keys) → (edge start, edge end, the third vertex) per triangle.
+    type Edges = HashMap<([u32; 3], [u32; 3]), Vec<(Vec3, Vec3, Vec3)>>;
+    let mut map = Edges::new();
     for i in 0..mesh.triangles.len() {
         if !(mesh.area(i) > 0.0) {
             continue;
@@ -129,7 +131,7 @@ fn interior_edges(mesh: &Mesh, eye: Vec3) -> Vec<(Vec3, Vec3)> {
         })
         .collect();
     // HashMap order is random per process: sort so the batch is reproducible.
-    edges.sort_by(|x, y| (key(x.0), key(x.1)).cmp(&(key(y.0), key(y.1))));
+    edges.sort_by_key(|e| (key(e.0), key(e.1)));
     edges
 }
 

@@ -141,7 +141,7 @@ pub fn run(a: DatasetArgs) -> Result<()> {
         }
         let mut ref_opts = RenderOptions::from_scene(scene, BufferRequest { split: true, gbuffers: true, descriptors: false });
         ref_opts.spp = a.ref_spp;
-        ref_opts.seed = mix64(shot_seed ^ 0x5EED_0F_4EF);
+        ref_opts.seed = mix64(shot_seed ^ 0x0005_EED0_F4EF);
         let (reference, _) = integrator::render(scene, &ref_opts, &|_| {})?;
         film::exr_io::write_frame(&reference, &dir.join("reference.exr"))?;
         film::png::write_radiance(&dir.join("reference.png"), w, h, &reference.radiance.mean, 0.0)?;
