@@ -20,6 +20,7 @@ struct Args {
 }
 
 #[derive(Subcommand)]
+#[allow(clippy::large_enum_variant, reason = "parsed once per run; boxing the arguments would only add noise")]
 enum Command {
     /// Render a scene (.toml, .gltf/.glb) to EXR, with an optional PNG preview.
     Render(cli::render::RenderArgs),

@@ -44,9 +44,9 @@ fn main() {
             let mut model = MethodModel::init(&cfg, *m, &dev);
             if st.lr_rest.is_none() {
                 for b in [&mut model.diffuse, &mut model.specular] {
-                    b.d_g = b.d_g.take().map(|x| denoiser::burn::module::Module::no_grad(x));
-                    b.d_p = b.d_p.take().map(|x| denoiser::burn::module::Module::no_grad(x));
-                    b.path = b.path.take().map(|x| denoiser::burn::module::Module::no_grad(x));
+                    b.d_g = b.d_g.take().map(denoiser::burn::module::Module::no_grad);
+                    b.d_p = b.d_p.take().map(denoiser::burn::module::Module::no_grad);
+                    b.path = b.path.take().map(denoiser::burn::module::Module::no_grad);
                 }
             }
             let opts = TrainOptions {

@@ -169,7 +169,7 @@ pub fn ssim_rgb(x: &[f64], y: &[f64], w: usize, h: usize, range: f64) -> f64 {
         return 1.0;
     }
     let k = SSIM_WINDOW.min(w).min(h);
-    let k = if k % 2 == 0 { k - 1 } else { k };
+    let k = if k.is_multiple_of(2) { k - 1 } else { k };
     let plane = |v: &[f64], c: usize| -> Vec<f64> { (0..w * h).map(|i| v[3 * i + c]).collect() };
     let s: f64 = (0..3).map(|c| ssim_plane(&plane(x, c), &plane(y, c), w, h, k, range)).sum::<f64>() / 3.0;
     if s.is_finite() {

@@ -541,7 +541,8 @@ mod tests {
         };
         check("input", &an_x, &fd_x);
         // Weights: perturb one entry of a layer through its flat data and rebuild.
-        let layers: Vec<(&str, Box<dyn Fn(&MsKpNet) -> &Conv>)> = vec![
+        type LayerOf = Box<dyn Fn(&MsKpNet) -> &Conv>;
+        let layers: Vec<(&str, LayerOf)> = vec![
             ("encoder 0", Box::new(|n: &MsKpNet| &n.down[0].layers[0])),
             ("bottleneck", Box::new(|n: &MsKpNet| &n.down[2].layers[1])),
             ("decoder 0", Box::new(|n: &MsKpNet| &n.up[0].layers[0])),

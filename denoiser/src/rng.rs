@@ -44,7 +44,7 @@ impl SplitMix64 {
     /// Uniform integer in [0, n); n must be > 0. Lemire's multiply-shift, bias < 2^-32 for the
     /// sizes used here (n < 2^32).
     pub fn below(&mut self, n: usize) -> usize {
-        ((self.next_u64() >> 32) * n as u64 >> 32) as usize
+        (((self.next_u64() >> 32) * n as u64) >> 32) as usize
     }
 
     /// A uniformly random permutation of 0..n (Fisher–Yates).

@@ -1,9 +1,10 @@
 //! Quick single-thread ray benchmark against Embree on the two `pixguide bench` meshes:
 //! `cargo run --release -p renderer --example bvh_quick [rays]`.
 
-use renderer::bench::{displaced_sphere, embree_python, embree_script, ray_bench, EmbreeSetup, RayBatch};
+use renderer::bench::{displaced_sphere, embree_script, ray_bench, EmbreeSetup, RayBatch, SphereStyle};
 use renderer::scene::Scene;
 use std::path::Path;
+use tools_venv::embree_python;
 
 fn main() {
     let rays: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(500_000);
@@ -11,7 +12,7 @@ fn main() {
     let python = embree_python(&ws.join("target/embree-venv")).expect("embree venv");
     let setup = EmbreeSetup { python, script: embree_script(&ws), work_dir: ws.join("target/embree-bench"), robust: false };
     let scene = Scene::load(&ws.join("scenes/cornell-box/scene.toml")).expect("scene");
-    for (name, mesh) in [("cornell", scene.mesh.clone()), ("sphere", displaced_sphere(230, 230))] {
+    for (name, mesh) in [("cornell", scene.mesh.clone()), ("sphere", displaced_sphere(230, 230, SphereStyle::Bench))] {
         let cam = RayBatch::camera(&mesh, rays, 1);
         let rnd = RayBatch::random_in_bounds(&mesh, rays, 2);
         let report = ray_bench(&mesh, &[("camera", &cam), ("random", &rnd)], 1, 3, Some(&setup)).expect("bench runs");

@@ -2,22 +2,11 @@
 //! `cargo run --release -p renderer --example ray_bench [threads] [robust]`.
 //! Also compares obvhs build presets (build time vs rays/s) when PIXGUIDE_BENCH_PRESETS is set.
 
-use glam::Vec3;
-use renderer::bench::{displaced_sphere, embree_python, embree_script, ray_bench, trace, EmbreeSetup, RayBatch};
-use renderer::geometry::{Accel, Mesh};
+use renderer::bench::{displaced_sphere, embree_script, obj_mesh, ray_bench, trace, EmbreeSetup, RayBatch, SphereStyle};
+use renderer::geometry::Accel;
 use std::path::Path;
 use std::time::Instant;
-
-fn load_obj(path: &Path) -> Mesh {
-    let (models, _) = tobj::load_obj(path, &tobj::GPU_LOAD_OPTIONS).expect("obj loads");
-    let mut mesh = Mesh::default();
-    for m in models {
-        let p: Vec<Vec3> = m.mesh.positions.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
-        let t: Vec<[u32; 3]> = m.mesh.indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-        mesh.append(&p, &[], &[], &t, 0);
-    }
-    mesh
-}
+use tools_venv::embree_python;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -27,9 +16,9 @@ fn main() {
     let python = embree_python(&ws.join("target/embree-venv")).expect("embree venv");
     let setup = EmbreeSetup { python, script: embree_script(&ws), work_dir: ws.join("target/embree-bench"), robust };
     let meshes = [
-        ("cornell-box-mcguire", load_obj(&ws.join("scenes/assets/cornell-box-mcguire/CornellBox-Original.obj"))),
-        ("stanford-bunny", load_obj(&ws.join("scenes/assets/stanford-bunny/bunny.obj"))),
-        ("sphere-1M", displaced_sphere(700, 700)),
+        ("cornell-box-mcguire", obj_mesh(&ws.join("scenes/assets/cornell-box-mcguire/CornellBox-Original.obj")).expect("obj loads")),
+        ("stanford-bunny", obj_mesh(&ws.join("scenes/assets/stanford-bunny/bunny.obj")).expect("obj loads")),
+        ("sphere-1M", displaced_sphere(700, 700, SphereStyle::Bench)),
     ];
     for (name, mesh) in &meshes {
         let cam = RayBatch::camera(mesh, 500_000, 1);

@@ -1,6 +1,7 @@
 //! Ray-tracing benchmark: BVH build time and closest-hit rays/s on camera rays and on random
 //! rays, next to Embree's rays/s on the very same rays (through the embreex Python binding and
-//! `tools/embree/trace.py`). Also the plumbing the Embree cross-check test uses.
+//! `tools/embree/trace.py`). Also the plumbing the Embree cross-check test uses. The venv that
+//! holds the binding is built outside this library, by the `tools-venv` crate (tools/venv/).
 
 use crate::geometry::{Accel, Hit, Mesh};
 use crate::math::Ray;
@@ -103,7 +104,9 @@ impl RayBatch {
 fn interior_edges(mesh: &Mesh, eye: Vec3) -> Vec<(Vec3, Vec3)> {
     use std::collections::HashMap;
     let key = |p: Vec3| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
-    let mut map: HashMap<([u32; 3], [u32; 3]), Vec<(Vec3, Vec3, Vec3)>> = HashMap::new();
+    // Edge (its two vertices' keys) → (edge start, edge end, the third vertex) per triangle.
+    type Edges = HashMap<([u32; 3], [u32; 3]), Vec<(Vec3, Vec3, Vec3)>>;
+    let mut map = Edges::new();
     for i in 0..mesh.triangles.len() {
         if !(mesh.area(i) > 0.0) {
             continue;
@@ -128,7 +131,7 @@ fn interior_edges(mesh: &Mesh, eye: Vec3) -> Vec<(Vec3, Vec3)> {
         })
         .collect();
     // HashMap order is random per process: sort so the batch is reproducible.
-    edges.sort_by(|x, y| (key(x.0), key(x.1)).cmp(&(key(y.0), key(y.1))));
+    edges.sort_by_key(|e| (key(e.0), key(e.1)));
     edges
 }
 
@@ -167,65 +170,6 @@ pub fn thread_cpu_seconds() -> Option<f64> {
 /// Location of the Python helper, relative to the workspace root.
 pub fn embree_script(workspace: &Path) -> PathBuf {
     workspace.join("tools/embree/trace.py")
-}
-
-/// Returns the Python interpreter of the venv at `venv` with embreex and numpy installed,
-/// creating the venv (python3 -m venv; pip install embreex numpy) if it does not work yet.
-pub fn embree_python(venv: &Path) -> Result<PathBuf> {
-    tools_venv(venv, &["embreex", "numpy"], "import embreex.rtcore_scene, numpy").map(|v| v.python)
-}
-
-/// A Python venv holding a tool pixguide borrows (Embree's binding, OIDN's library).
-pub struct ToolsVenv {
-    pub python: PathBuf,
-    /// What the probe printed, trimmed.
-    pub probe: String,
-}
-
-/// The venv at `venv` in which the Python snippet `probe` runs successfully, built (`python3 -m
-/// venv --clear`, then `pip install packages`) when the venv is missing or the probe fails in
-/// it: a half-finished install or a venv whose python3 went away is rebuilt rather than
-/// patched. A lock file beside the venv (`<venv>.lock`) is held meanwhile, so that two processes
-/// (a test and an eval, say) never build the same venv at once.
-pub fn tools_venv(venv: &Path, packages: &[&str], probe: &str) -> Result<ToolsVenv> {
-    let fail = |what: String, detail: &str| Error::Invalid(format!("Python venv {}: {what}{}{}", venv.display(), if detail.is_empty() { "" } else { ": " }, detail));
-    if let Some(dir) = venv.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|e| fail(format!("creating {}", dir.display()), &e.to_string()))?;
-    }
-    let lock_path = venv.with_extension("lock");
-    let lock = std::fs::OpenOptions::new().create(true).truncate(false).write(true).open(&lock_path).map_err(|e| fail(format!("opening {}", lock_path.display()), &e.to_string()))?;
-    lock.lock().map_err(|e| fail(format!("locking {}", lock_path.display()), &e.to_string()))?;
-    let python = venv.join("bin/python");
-    let run_probe = || Command::new(&python).args(["-c", probe]).output();
-    if let Ok(out) = run_probe() {
-        if out.status.success() {
-            return Ok(ToolsVenv { python, probe: String::from_utf8_lossy(&out.stdout).trim().to_string() });
-        }
-    }
-    let out = Command::new("python3").args(["-m", "venv", "--clear"]).arg(venv).output().map_err(|e| fail("python3 -m venv".into(), &e.to_string()))?;
-    if !out.status.success() {
-        return Err(fail("python3 -m venv failed".into(), &last_line(&out.stderr)));
-    }
-    let install = format!("pip install {}", packages.join(" "));
-    let out = Command::new(venv.join("bin/pip"))
-        .args(["install", "--quiet", "--disable-pip-version-check"])
-        .args(packages)
-        .output()
-        .map_err(|e| fail(install.clone(), &e.to_string()))?;
-    if !out.status.success() {
-        return Err(fail(format!("{install} failed"), &last_line(&out.stderr)));
-    }
-    let out = run_probe().map_err(|e| fail(format!("running {}", python.display()), &e.to_string()))?;
-    if !out.status.success() {
-        return Err(fail(format!("{install} done, but the probe `{probe}` fails"), &last_line(&out.stderr)));
-    }
-    Ok(ToolsVenv { python, probe: String::from_utf8_lossy(&out.stdout).trim().to_string() })
-}
-
-/// The last non-empty line of a tool's error output: pip and Python put the actual error there,
-/// after pages of context that would drown a one-line message.
-fn last_line(stderr: &[u8]) -> String {
-    String::from_utf8_lossy(stderr).lines().map(str::trim).rfind(|l| !l.is_empty()).unwrap_or("").to_string()
 }
 
 /// Traces `batch` against `mesh` with Embree via `script`, exchanging binary files in `work_dir`.
@@ -432,27 +376,63 @@ impl fmt::Display for RayBenchReport {
     }
 }
 
-/// A displaced UV sphere of 2·n·m triangles with long shared quad diagonals: the benchmark's
-/// large mesh (`displaced_sphere(230, 230)` has 105,800 triangles).
-pub fn displaced_sphere(n: u32, m: u32) -> Mesh {
+/// The triangles of an OBJ file as a bare mesh: positions only, every triangle with material 0,
+/// faces triangulated by tobj (its GPU load options). The shipped meshes of the ray benchmark
+/// and the Embree cross-check, without the scene loader's materials and transforms.
+pub fn obj_mesh(path: &Path) -> Result<Mesh> {
+    let (models, _) = tobj::load_obj(path, &tobj::GPU_LOAD_OPTIONS).map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
+    let mut mesh = Mesh::default();
+    for m in models {
+        let p: Vec<Vec3> = m.mesh.positions.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
+        let t: Vec<[u32; 3]> = m.mesh.indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        mesh.append(&p, &[], &[], &t, 0);
+    }
+    Ok(mesh)
+}
+
+/// Which of the two test meshes `displaced_sphere` builds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SphereStyle {
+    /// The benchmark's large mesh (`pixguide bench`, the examples): one displacement frequency,
+    /// centred on the origin, every quad split along the same diagonal, so long diagonals are
+    /// shared.
+    Bench,
+    /// The Embree cross-check's mesh: a second, finer ripple on top, moved off the origin, and
+    /// the quads split along alternating diagonals: many long, thin shared diagonals near the
+    /// poles.
+    CrossCheck,
+}
+
+/// A displaced sphere as a latitude/longitude grid of n × m quads: 2·n·m triangles
+/// (`displaced_sphere(230, 230, _)` has 105,800).
+pub fn displaced_sphere(n: u32, m: u32, style: SphereStyle) -> Mesh {
+    let cross_check = style == SphereStyle::CrossCheck;
     let mut positions = Vec::new();
     for j in 0..=n {
-        let th = std::f32::consts::PI * j as f32 / n as f32;
+        let theta = std::f32::consts::PI * j as f32 / n as f32;
         for i in 0..=m {
-            let ph = std::f32::consts::TAU * i as f32 / m as f32;
-            let r = 1.0 + 0.08 * (5.0 * th).sin() * (7.0 * ph).cos();
-            positions.push(Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin()) * r);
+            let phi = std::f32::consts::TAU * i as f32 / m as f32;
+            let mut r = 1.0 + 0.08 * (5.0 * theta).sin() * (7.0 * phi).cos();
+            if cross_check {
+                r += 0.02 * (23.0 * phi + 3.0 * theta).sin();
+            }
+            let p = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin()) * r;
+            positions.push(if cross_check { p + Vec3::new(0.3, -0.2, 0.1) } else { p });
         }
     }
     let idx = |i: u32, j: u32| j * (m + 1) + i;
     let mut tris = Vec::new();
     for j in 0..n {
         for i in 0..m {
-            tris.extend([[idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)], [idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]]);
+            let (a, b, c, d) = (idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1));
+            if cross_check && (i + j) % 2 == 1 {
+                tris.extend([[a, b, d], [b, c, d]]);
+            } else {
+                tris.extend([[a, b, c], [a, c, d]]);
+            }
         }
     }
     let mut mesh = Mesh::default();
     mesh.append(&positions, &[], &[], &tris, 0);
     mesh
 }
-

@@ -214,8 +214,8 @@ fn descriptors_of_one_diffuse_bounce_match_hand_computation() {
             let t0 = &r[field::THROUGHPUT..field::THROUGHPUT + 3];
             let pw = r[field::PATH_WEIGHT];
             assert!(pw > 0.0);
-            for c in 0..3 {
-                assert!((t0[c] / pw - 0.6).abs() < 1e-4, "throughput/pdf {} ", t0[c] / pw);
+            for t in t0 {
+                assert!((t / pw - 0.6).abs() < 1e-4, "throughput/pdf {} ", t / pw);
             }
             let li = &r[field::LIGHT_INTENSITY..field::LIGHT_INTENSITY + 3];
             if li[0] > 0.0 {

@@ -5,10 +5,10 @@
 //! Needs python3 with venv support and network access to PyPI the first time: the venv lives in
 //! `target/embree-venv` and is reused. Without it the test fails (it is required in CI).
 
-use glam::Vec3;
-use renderer::bench::{embree_python, embree_script, embree_trace, trace, RayBatch};
+use renderer::bench::{displaced_sphere, embree_script, embree_trace, obj_mesh, trace, RayBatch, SphereStyle};
 use renderer::geometry::{Accel, Mesh};
 use std::path::{Path, PathBuf};
+use tools_venv::embree_python;
 
 fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("renderer/ has a parent").to_path_buf()
@@ -16,43 +16,8 @@ fn workspace() -> PathBuf {
 
 fn load_obj(rel: &str) -> Mesh {
     let path = workspace().join(rel);
-    let (models, _) = tobj::load_obj(&path, &tobj::GPU_LOAD_OPTIONS).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut mesh = Mesh::default();
-    for m in models {
-        let p: Vec<Vec3> = m.mesh.positions.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
-        let t: Vec<[u32; 3]> = m.mesh.indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-        mesh.append(&p, &[], &[], &t, 0);
-    }
+    let mesh = obj_mesh(&path).unwrap_or_else(|e| panic!("{e}"));
     assert!(!mesh.triangles.is_empty(), "{}: no triangles", path.display());
-    mesh
-}
-
-/// A displaced sphere as a latitude/longitude grid of quads split along alternating diagonals:
-/// 2·n·m triangles with many long, thin shared diagonals near the poles.
-fn displaced_sphere(n: u32, m: u32) -> Mesh {
-    let mut positions = Vec::new();
-    for j in 0..=n {
-        let theta = std::f32::consts::PI * j as f32 / n as f32;
-        for i in 0..=m {
-            let phi = std::f32::consts::TAU * i as f32 / m as f32;
-            let r = 1.0 + 0.08 * (5.0 * theta).sin() * (7.0 * phi).cos() + 0.02 * (23.0 * phi + 3.0 * theta).sin();
-            positions.push(Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin()) * r + Vec3::new(0.3, -0.2, 0.1));
-        }
-    }
-    let idx = |i: u32, j: u32| j * (m + 1) + i;
-    let mut tris = Vec::new();
-    for j in 0..n {
-        for i in 0..m {
-            let (a, b, c, d) = (idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1));
-            if (i + j) % 2 == 0 {
-                tris.extend([[a, b, c], [a, c, d]]);
-            } else {
-                tris.extend([[a, b, d], [b, c, d]]);
-            }
-        }
-    }
-    let mut mesh = Mesh::default();
-    mesh.append(&positions, &[], &[], &tris, 0);
     mesh
 }
 
@@ -65,7 +30,7 @@ fn matches_embree_on_a_million_rays() {
     let script = embree_script(&workspace());
     let work = workspace().join("target/embree-crosscheck");
 
-    let sphere = displaced_sphere(230, 230);
+    let sphere = displaced_sphere(230, 230, SphereStyle::CrossCheck);
     assert!(sphere.triangles.len() >= 100_000);
     let meshes = [
         ("cornell-box-mcguire", load_obj("scenes/assets/cornell-box-mcguire/CornellBox-Original.obj")),

@@ -4,11 +4,12 @@
 use crate::alloc_stats;
 use anyhow::Result;
 use clap::Args;
-use renderer::bench::{displaced_sphere, embree_python, embree_script, ray_bench, EmbreeSetup, RayBatch};
+use renderer::bench::{displaced_sphere, embree_script, ray_bench, EmbreeSetup, RayBatch, SphereStyle};
 use renderer::film::BufferRequest;
 use renderer::integrator::{self, RenderOptions};
 use renderer::scene::Scene;
 use std::path::{Path, PathBuf};
+use tools_venv::embree_python;
 
 #[derive(Args)]
 pub struct BenchArgs {
@@ -91,7 +92,7 @@ fn rays(scene: &Scene, a: &BenchArgs, threads: usize) -> Result<()> {
             }
         }
     };
-    let big = displaced_sphere(230, 230);
+    let big = displaced_sphere(230, 230, SphereStyle::Bench);
     for (name, mesh) in [(a.scene.display().to_string(), &scene.mesh), (format!("displaced sphere ({} triangles)", big.triangles.len()), &big)] {
         let cam = RayBatch::camera(mesh, a.rays, 1);
         let rnd = RayBatch::random_in_bounds(mesh, a.rays, 2);

@@ -9,6 +9,8 @@ use renderer::integrator::{self, RenderOptions};
 use renderer::randomize::{randomize, Original};
 use renderer::rng::mix64;
 use renderer::scene::Scene;
+use serde::Serialize;
+use serde_json::value::RawValue;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -139,7 +141,7 @@ pub fn run(a: DatasetArgs) -> Result<()> {
         }
         let mut ref_opts = RenderOptions::from_scene(scene, BufferRequest { split: true, gbuffers: true, descriptors: false });
         ref_opts.spp = a.ref_spp;
-        ref_opts.seed = mix64(shot_seed ^ 0x5EED_0F_4EF);
+        ref_opts.seed = mix64(shot_seed ^ 0x0005_EED0_F4EF);
         let (reference, _) = integrator::render(scene, &ref_opts, &|_| {})?;
         film::exr_io::write_frame(&reference, &dir.join("reference.exr"))?;
         film::png::write_radiance(&dir.join("reference.png"), w, h, &reference.radiance.mean, 0.0)?;
@@ -171,6 +173,15 @@ fn dir_size(dir: &Path) -> u64 {
     std::fs::read_dir(dir).map(|r| r.flatten().filter_map(|e| e.metadata().ok()).map(|m| m.len()).sum()).unwrap_or(0)
 }
 
+/// One line of shots.jsonl: the shot's split, its folder relative to the dataset, and its
+/// shot.json as it is on disk.
+#[derive(Serialize)]
+struct IndexLine<'a> {
+    split: &'a str,
+    dir: String,
+    params: &'a RawValue,
+}
+
 /// shots.jsonl (one line per shot with its split and folder) and references.png (all
 /// reference thumbnails on one sheet).
 fn write_index(out: &Path, jobs: &[Job], paths: &[PathBuf]) -> Result<(PathBuf, PathBuf)> {
@@ -179,8 +190,11 @@ fn write_index(out: &Path, jobs: &[Job], paths: &[PathBuf]) -> Result<(PathBuf, 
     let mut thumbs = Vec::new();
     for job in jobs {
         let dir = out.join(job.split).join(format!("{}_{:06}", scene_name(&paths[job.scene]), job.shot));
-        let Ok(json) = std::fs::read_to_string(dir.join("shot.json")) else { continue };
-        lines.push(format!("{{\"split\":\"{}\",\"dir\":\"{}/{}\",\"params\":{}}}", job.split, job.split, dir.file_name().unwrap().to_string_lossy(), json));
+        let shot_json = dir.join("shot.json");
+        let Ok(json) = std::fs::read_to_string(&shot_json) else { continue };
+        let params: &RawValue = serde_json::from_str(&json).with_context(|| format!("parsing {}", shot_json.display()))?;
+        let line = IndexLine { split: job.split, dir: format!("{}/{}", job.split, dir.file_name().unwrap().to_string_lossy()), params };
+        lines.push(serde_json::to_string(&line)?);
         if let Ok(img) = image::open(dir.join("reference.png")) {
             thumbs.push(img.to_rgb8());
         }

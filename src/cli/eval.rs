@@ -393,10 +393,10 @@ pub fn png_dir(out: &Path) -> PathBuf {
 pub fn run(a: EvalArgs) -> Result<()> {
     let t0 = Instant::now();
     let load_start = load1();
-    if a.spp.is_empty() || a.spp.iter().any(|&s| s == 0) {
+    if a.spp.is_empty() || a.spp.contains(&0) {
         bail!("--spp: give positive sample counts, e.g. 2,4,8");
     }
-    if a.picture_spp.iter().any(|&s| s == 0) {
+    if a.picture_spp.contains(&0) {
         bail!("--picture-spp: give positive sample counts");
     }
     let scenes = scenes(&a.scenes)?;

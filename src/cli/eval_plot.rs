@@ -78,22 +78,9 @@ impl DrawingBackend for Canvas<'_> {
         };
         let trans: FontTransform = style.transform();
         let color = style.color();
-        for (k, ch) in text.chars().enumerate() {
-            for (row, bits) in font::glyph(ch).iter().enumerate() {
-                for col in 0..3 {
-                    if bits & (4 >> col) == 0 {
-                        continue;
-                    }
-                    for sy in 0..s {
-                        for sx in 0..s {
-                            let gx = k as i32 * 4 * s + col * s + sx + dx;
-                            let gy = row as i32 * s + sy + dy;
-                            let (x, y) = trans.transform(gx, gy);
-                            self.draw_pixel((pos.0 + x, pos.1 + y), color)?;
-                        }
-                    }
-                }
-            }
+        for (gx, gy) in font::pixels(text, s as u32) {
+            let (x, y) = trans.transform(gx as i32 + dx, gy as i32 + dy);
+            self.draw_pixel((pos.0 + x, pos.1 + y), color)?;
         }
         Ok(())
     }
@@ -300,20 +287,8 @@ pub fn write_pair(path: &Path, x_label: &str, x_keys: Option<Vec<f64>>, left: (&
 /// Text in colour `rgb` at glyph scale `s` into an RGB8 buffer `width` pixels wide.
 pub fn text(px: &mut [u8], width: u32, x: u32, y: u32, s: u32, rgb: [u8; 3], t: &str) {
     let mut c = Canvas { h: px.len() as u32 / 3 / width.max(1), px, w: width };
-    for (k, ch) in t.chars().enumerate() {
-        for (row, bits) in font::glyph(ch).iter().enumerate() {
-            for col in 0..3u32 {
-                if bits & (4 >> col) == 0 {
-                    continue;
-                }
-                for sy in 0..s {
-                    for sx in 0..s {
-                        let p = ((x + k as u32 * 4 * s + col * s + sx) as i32, (y + row as u32 * s + sy) as i32);
-                        let _ = c.draw_pixel(p, BackendColor { alpha: 1.0, rgb: (rgb[0], rgb[1], rgb[2]) });
-                    }
-                }
-            }
-        }
+    for (gx, gy) in font::pixels(t, s) {
+        let _ = c.draw_pixel(((x + gx) as i32, (y + gy) as i32), BackendColor { alpha: 1.0, rgb: (rgb[0], rgb[1], rgb[2]) });
     }
 }
 

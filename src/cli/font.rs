@@ -61,26 +61,41 @@ pub fn glyph(c: char) -> [u8; 5] {
     }
 }
 
+/// The pixels `text` covers at glyph scale `s` (each font pixel an s × s block, glyphs 4·s
+/// apart), as offsets from its top-left corner, glyph by glyph, row by row.
+pub fn pixels(text: &str, s: u32) -> impl Iterator<Item = (u32, u32)> + '_ {
+    text.chars().enumerate().flat_map(move |(k, c)| {
+        glyph(c).into_iter().enumerate().flat_map(move |(row, bits)| {
+            (0..3u32).filter(move |col| bits & (4 >> col) != 0).flat_map(move |col| {
+                (0..s).flat_map(move |sy| (0..s).map(move |sx| (k as u32 * 4 * s + col * s + sx, row as u32 * s + sy)))
+            })
+        })
+    })
+}
+
 /// Draws `text` in white at (x, y) into an RGB8 buffer `width` pixels wide, scaled ×2.
 pub fn draw_text(px: &mut [u8], width: u32, x: u32, y: u32, text: &str) {
     let height = px.len() as u32 / 3 / width.max(1);
-    for (k, c) in text.chars().enumerate() {
-        let g = glyph(c);
-        for (row, bits) in g.iter().enumerate() {
-            for col in 0..3 {
-                if bits & (4 >> col) == 0 {
-                    continue;
-                }
-                for dy in 0..2 {
-                    for dx in 0..2 {
-                        let (xx, yy) = (x + k as u32 * 8 + col * 2 + dx, y + row as u32 * 2 + dy);
-                        if xx < width && yy < height {
-                            let o = ((yy * width + xx) * 3) as usize;
-                            px[o..o + 3].copy_from_slice(&[255, 255, 255]);
-                        }
-                    }
-                }
-            }
+    for (gx, gy) in pixels(text, 2) {
+        let (xx, yy) = (x + gx, y + gy);
+        if xx < width && yy < height {
+            let o = ((yy * width + xx) * 3) as usize;
+            px[o..o + 3].copy_from_slice(&[255, 255, 255]);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pixels_are_the_set_bits_scaled_and_spaced() {
+        let t: Vec<_> = pixels("T", 1).collect();
+        assert_eq!(t, [(0, 0), (1, 0), (2, 0), (1, 1), (1, 2), (1, 3), (1, 4)]);
+        let tt: Vec<_> = pixels("TT", 2).collect();
+        assert_eq!(tt.len(), 2 * 7 * 4);
+        assert_eq!(&tt[..4], [(0, 0), (1, 0), (0, 1), (1, 1)]);
+        assert_eq!(tt[7 * 4], (8, 0));
     }
 }

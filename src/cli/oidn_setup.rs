@@ -3,8 +3,8 @@
 //! The library comes from the pyoidn wheel on PyPI, which ships `libOpenImageDenoise.so.2` with
 //! its core library, CPU device module and TBB. It is installed into a venv under `target/` the
 //! first time it is needed, through the same helper as Embree's venv for the BVH cross-check
-//! (`renderer::bench::tools_venv`). Python is only the installer: the denoising runs in this
-//! process (`denoiser::oidn`, dlopen of the wheel's library).
+//! (`tools_venv::tools_venv`, tools/venv/). Python is only the installer: the denoising runs in
+//! this process (`denoiser::oidn`, dlopen of the wheel's library).
 
 use anyhow::{Context, Result};
 use denoiser::infer::{Denoised, Timings};
@@ -43,7 +43,7 @@ pub fn venv_dir() -> PathBuf {
 /// The folder holding `libOpenImageDenoise.so.2`, installing the wheel first if needed.
 pub fn library_dir() -> Result<PathBuf> {
     let venv = venv_dir();
-    let v = renderer::bench::tools_venv(&venv, &[PACKAGE], PROBE)
+    let v = tools_venv::tools_venv(&venv, &[PACKAGE], PROBE)
         .with_context(|| format!("installing Open Image Denoise (pip {PACKAGE})"))?;
     Ok(PathBuf::from(v.probe))
 }

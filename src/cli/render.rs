@@ -84,7 +84,8 @@ fn parse_denoise(s: &str) -> std::result::Result<DenoiseModel, String> {
 
 /// The denoiser of `--denoise`, ready to run.
 enum Denoiser {
-    Net(Loaded),
+    /// Boxed: the weights header makes `Loaded` large next to `Oidn`.
+    Net(Box<Loaded>),
     /// With the seconds its loading took.
     Oidn(Oidn, f64),
 }
@@ -96,7 +97,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     // Weights (or OIDN) before the render, so that a missing file costs nothing.
     let loaded = match a.denoise.0 {
         None => None,
-        Some(Model::Net(m)) => Some(Denoiser::Net(dn::load_weights(m, a.weights.as_deref())?)),
+        Some(Model::Net(m)) => Some(Denoiser::Net(Box::new(dn::load_weights(m, a.weights.as_deref())?))),
         Some(Model::Oidn) => {
             if a.weights.is_some() {
                 anyhow::bail!("--weights does not apply to --denoise oidn (OIDN brings its own weights)");

@@ -90,12 +90,12 @@ pub fn read_frame(path: &Path) -> Result<Frame> {
         let mut buf = PixelBuffer::new(l.mean.len(), w * h);
         for (c, name) in l.mean.iter().enumerate() {
             let m = map.get(*name)?;
-            for i in 0..w * h {
-                buf.mean[i * buf.channels + c] = m[i];
+            for (i, &x) in m[..w * h].iter().enumerate() {
+                buf.mean[i * buf.channels + c] = x;
             }
             if let Some(v) = map.get(l.var[c]) {
-                for i in 0..w * h {
-                    buf.var[i * buf.channels + c] = v[i];
+                for (i, &x) in v[..w * h].iter().enumerate() {
+                    buf.var[i * buf.channels + c] = x;
                 }
             }
         }

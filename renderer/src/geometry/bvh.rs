@@ -109,20 +109,7 @@ impl RayData {
         if !o.is_finite() || !d.is_finite() {
             return None;
         }
-        let a = d.abs();
-        // kz: the dominant axis; kx, ky: the others, swapped for a negative dominant component
-        // so the winding (and thus the sign of the edge functions) is preserved.
-        let kz = if a.x > a.y { if a.x > a.z { 0 } else { 2 } } else if a.y > a.z { 1 } else { 2 };
-        if a[kz] == 0.0 {
-            return None;
-        }
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
-        if d[kz] < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
-        let sz = 1.0 / d[kz];
-        let (sx, sy) = (d[kx] * sz, d[ky] * sz);
+        let (k, [sx, sy, sz]) = triangle::shear_axes(d)?;
         let inv = |x: f32| 1.0 / if x.abs() < MIN_DIR { MIN_DIR.copysign(x) } else { x };
         let near = |i: usize| if d[i] < 0.0 { 3 + i } else { i };
         Some(RayData {
@@ -130,7 +117,7 @@ impl RayData {
             inv: [Vec4::splat(inv(d.x)), Vec4::splat(inv(d.y)), Vec4::splat(inv(d.z))],
             near: [near(0), near(1), near(2)],
             far: [(near(0) + 3) % 6, (near(1) + 3) % 6, (near(2) + 3) % 6],
-            k: [kx, ky, kz],
+            k,
             s: [Vec4::splat(sx), Vec4::splat(sy), Vec4::splat(sz)],
             ss: [sx, sy, sz],
         })

@@ -30,20 +30,7 @@ impl RayShear {
         if !origin.is_finite() || !dir.is_finite() {
             return None;
         }
-        let a = dir.abs();
-        // kz: the dominant axis; kx, ky: the others, swapped for a negative dominant component
-        // so the winding (and thus the sign of the edge functions) is preserved.
-        let kz = if a.x > a.y { if a.x > a.z { 0 } else { 2 } } else if a.y > a.z { 1 } else { 2 };
-        if a[kz] == 0.0 {
-            return None;
-        }
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
-        if dir[kz] < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
-        let sz = 1.0 / dir[kz];
-        let (sx, sy) = (dir[kx] * sz, dir[ky] * sz);
+        let ([kx, ky, kz], [sx, sy, sz]) = shear_axes(dir)?;
         let mut mx = Vec3A::ZERO;
         mx[kx] = 1.0;
         mx[kz] = -sx;
@@ -54,6 +41,27 @@ impl RayShear {
         mz[kz] = sz;
         Some(RayShear { origin: origin.into(), mx, my, mz })
     }
+}
+
+/// The shear of Woop et al. for a finite direction `dir`: the axes `[kx, ky, kz]` and the
+/// factors `[sx, sy, sz]` (`sz = 1/dir[kz]`, `sx = dir[kx]·sz`, `sy = dir[ky]·sz`). kz is the
+/// dominant axis; kx and ky are the others, swapped for a negative dominant component so the
+/// winding (and thus the sign of the edge functions) is preserved. `None` for a zero
+/// direction. Both this file's `RayShear` and the BVH's four-wide test shear with it.
+#[inline(always)]
+pub fn shear_axes(dir: Vec3) -> Option<([usize; 3], [f32; 3])> {
+    let a = dir.abs();
+    let kz = if a.x > a.y { if a.x > a.z { 0 } else { 2 } } else if a.y > a.z { 1 } else { 2 };
+    if a[kz] == 0.0 {
+        return None;
+    }
+    let mut kx = (kz + 1) % 3;
+    let mut ky = (kx + 1) % 3;
+    if dir[kz] < 0.0 {
+        std::mem::swap(&mut kx, &mut ky);
+    }
+    let sz = 1.0 / dir[kz];
+    Some(([kx, ky, kz], [dir[kx] * sz, dir[ky] * sz, sz]))
 }
 
 /// Intersection of the sheared ray with triangle (p0, p1, p2): `(t, b1, b2)` with t in (0, tmax),

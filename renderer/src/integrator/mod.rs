@@ -98,7 +98,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
         return Err(Error::Invalid(format!(
             "per-sample descriptors of {width}x{height} at {} spp need {} GiB; render fewer samples or a crop",
             opts.spp,
-            desc_len * 4 >> 30
+            (desc_len * 4) >> 30
         )));
     }
 
@@ -198,7 +198,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
         normal: buf(req.gbuffers, 3),
         depth: buf(req.gbuffers, 1),
         depth_scale: 10.0 * scene.radius,
-        descriptors: req.descriptors.then(|| Descriptors { width, height, spp: opts.spp, data: descriptors }),
+        descriptors: req.descriptors.then_some(Descriptors { width, height, spp: opts.spp, data: descriptors }),
         nonfinite_samples: 0,
     };
     let mut rays = 0;

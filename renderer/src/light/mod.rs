@@ -19,7 +19,7 @@ pub mod environment;
 mod tests;
 
 use crate::geometry::Mesh;
-use crate::scene::Material;
+use crate::material::Material;
 use crate::texture::Texture;
 use area::TriangleLight;
 use distribution::Distribution1D;

@@ -5,7 +5,7 @@
 use super::*;
 use crate::math::PI;
 use crate::rng::Pcg32;
-use crate::scene::{ColorParam, MaterialKind};
+use crate::material::{ColorParam, MaterialKind};
 
 fn material(emission: Vec3, two_sided: bool) -> Material {
     Material {

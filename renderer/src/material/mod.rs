@@ -16,6 +16,7 @@ use crate::math::is_finite3;
 use glam::{Vec2, Vec3};
 
 mod conductor;
+mod description;
 mod dielectric;
 pub mod fresnel;
 mod lambert;
@@ -25,6 +26,7 @@ mod plastic;
 mod tests;
 
 use conductor::Conductor;
+pub use description::{ColorParam, Material, MaterialKind};
 use dielectric::Dielectric;
 use plastic::Plastic;
 

@@ -253,7 +253,8 @@ mod tests {
     /// surface has every edge exactly once in each direction.
     fn is_watertight(m: &TriMesh) -> Result<(), String> {
         let key = |p: Vec3| ((p.x * 1e5).round() as i64, (p.y * 1e5).round() as i64, (p.z * 1e5).round() as i64);
-        let mut edges: HashMap<((i64, i64, i64), (i64, i64, i64)), i32> = HashMap::new();
+        type Vertex = (i64, i64, i64);
+        let mut edges: HashMap<(Vertex, Vertex), i32> = HashMap::new();
         for t in &m.triangles {
             for e in 0..3 {
                 let (a, b) = (key(m.positions[t[e] as usize]), key(m.positions[t[(e + 1) % 3] as usize]));
