@@ -751,8 +751,8 @@ mod tests {
         let swap = tiny().with_mskp(Some(swap.with_compositor(crate::mskp::ScaleCompositor::LowPassSwap)));
         // Edge-stopping kernels and joint-bilateral upsampling read guides at every level.
         let edge = MsKpConfig::new(34).with_widths(vec![4, 4, 4]).with_convs_per_block(1).with_kernel_scales(3).with_filter_size(3).with_margin(2);
-        let edge = tiny().with_mskp(Some(edge.with_edge_stopping(true)));
-        for (cfg, (w, h), tiles) in [(tiny(), (37, 29), [8, 13]), (mskp, (80, 72), [16, 24]), (swap, (120, 104), [16, 24]), (edge, (80, 72), [16, 24])] {
+        let edge = tiny().with_mskp(Some(edge.with_edge_stopping(crate::mskp::EdgeStopping::FeaturesAndColour)));
+        for (cfg, (w, h), tiles) in [(tiny(), (37, 29), [8, 13]), (mskp, (80, 72), [16, 24]), (swap, (120, 104), [16, 24]), (edge, (120, 104), [16, 24])] {
             staged_equals_model_forward_for(&cfg, w, h, tiles);
         }
     }

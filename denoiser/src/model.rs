@@ -8,7 +8,7 @@ use burn::tensor::{Device, Tensor};
 use crate::column::Column;
 use crate::ensemble::EnsembleConfig;
 use crate::kpcn::{KpcnConfig, Variant};
-use crate::mskp::{GuideGroup, MsKpConfig, ScaleCompositor};
+use crate::mskp::{EdgeStopping, GuideGroup, MsKpConfig, ScaleCompositor};
 use crate::pathnet::PathNetConfig;
 
 /// Sizes of every network of one branch (both branches use the same sizes).
@@ -100,12 +100,12 @@ impl DenoiserConfig {
         c
     }
 
-    /// `default` with kernels at all five levels and edge-stopping kernels (guided by colour,
-    /// normal, depth and albedo in D_G, colour and f_P in D_P; [`crate::mskp`]): the convex blend,
-    /// so clear of the swap's patent.
+    /// `default` with kernels at all five levels and edge-stopping kernels guided by the
+    /// auxiliary features (normal, depth and albedo in D_G, f_P in D_P; [`crate::mskp`]) with
+    /// joint-bilateral upsampling: the convex blend, so clear of the swap's patent.
     pub fn edge() -> Self {
         let mut c = Self::cpu_default();
-        c.mskp = c.mskp.map(|m| m.with_kernel_scales(5).with_edge_stopping(true));
+        c.mskp = c.mskp.map(|m| m.with_kernel_scales(5).with_edge_stopping(EdgeStopping::Features));
         c
     }
 
@@ -149,29 +149,31 @@ impl DenoiserConfig {
     pub fn mskp_for(&self, v: Variant) -> Option<MsKpConfig> {
         self.mskp.clone().map(|mut c| {
             c.in_channels = v.in_channels();
-            if c.edge_stopping {
-                c.guides = edge_guides(v);
+            if c.edge_stopping != EdgeStopping::Off {
+                c.guides = edge_guides(v, c.edge_stopping == EdgeStopping::FeaturesAndColour);
             }
             c
         })
     }
 }
 
-/// The edge-stopping guides of a column's input (channel offsets of kpcn::channels): the
-/// colour it filters as log(1 + c), brighter taps only (a symmetric colour distance kept every
-/// firefly: validation relMSE 0.41–1.07 where the plain kernels had 0.015), then what the variant adds: normal, depth (×20: it is path
-/// length over 10 scene radii, so neighbours differ by hundredths) and albedo for G; the path
-/// features f_P for P.
-fn edge_guides(v: Variant) -> Vec<GuideGroup> {
+/// The edge-stopping guides of a column's input (channel offsets of kpcn::channels): with
+/// `colour`, the colour it filters as log(1 + c), brighter taps only (a symmetric colour distance
+/// kept every firefly: validation relMSE 0.41–1.07 where plain kernels had 0.015); then what the
+/// variant adds: normal, depth (×20: it is path length over 10 scene radii, so neighbours differ
+/// by hundredths) and albedo for G, the path features f_P for P.
+fn edge_guides(v: Variant, colour: bool) -> Vec<GuideGroup> {
     use crate::kpcn::channels::*;
-    let colour = GuideGroup::new(0, 3, 1.0, true).brighter_only();
+    let colour = colour.then(|| GuideGroup::new(0, 3, 1.0, true).brighter_only());
     let g = COLOUR_BLOCK;
-    let g_block = [GuideGroup::new(g, 3, 1.0, false), GuideGroup::new(g + 10, 1, 20.0, false), GuideGroup::new(g + G_ALBEDO, 3, 1.0, false)];
-    match v {
-        Variant::G => [colour].into_iter().chain(g_block).collect(),
-        Variant::P => vec![colour, GuideGroup::new(COLOUR_BLOCK, P_FEATURES, 1.0, false)],
-        Variant::GP => [colour].into_iter().chain(g_block).chain([GuideGroup::new(COLOUR_BLOCK + G_BLOCK + 1, P_FEATURES, 1.0, false)]).collect(),
-    }
+    let g_block = vec![GuideGroup::new(g, 3, 1.0, false), GuideGroup::new(g + 10, 1, 20.0, false), GuideGroup::new(g + G_ALBEDO, 3, 1.0, false)];
+    let f_p = |at: usize| vec![GuideGroup::new(at, P_FEATURES, 1.0, false)];
+    let features = match v {
+        Variant::G => g_block,
+        Variant::P => f_p(COLOUR_BLOCK),
+        Variant::GP => g_block.into_iter().chain(f_p(COLOUR_BLOCK + G_BLOCK + 1)).collect(),
+    };
+    colour.into_iter().chain(features).collect()
 }
 
 impl DenoiserConfig {

@@ -69,13 +69,24 @@ pub struct MsKpConfig {
     /// preset uses the swap, which is covered by US patent 10,699,382 (docs/method.md §12).
     #[config(default = "ScaleCompositor::ConvexBlend")]
     pub compositor: ScaleCompositor,
-    /// Edge-stopping kernels: the column's guide groups are filled in by
-    /// `DenoiserConfig::mskp_for` from its input variant. Files without the field have none.
-    #[config(default = false)]
-    pub edge_stopping: bool,
+    /// Which edge-stopping guides the column gets; `DenoiserConfig::mskp_for` turns this into
+    /// `guides` for its input variant. Files without the field have none.
+    #[config(default = "EdgeStopping::Off")]
+    pub edge_stopping: EdgeStopping,
     /// The guide groups this column's kernels stop at (empty: plain softmax kernels).
     #[config(default = "Vec::new()")]
     pub guides: Vec<GuideGroup>,
+}
+
+/// The edge-stopping guides of a preset (per variant: `DenoiserConfig::mskp_for`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum EdgeStopping {
+    /// Plain softmax kernels.
+    Off,
+    /// The column's auxiliary features: normal, depth and albedo (D_G), f_P (D_P).
+    Features,
+    /// Those plus the colour, brighter taps only.
+    FeaturesAndColour,
 }
 
 /// Input channels `start..start + len` used as an edge-stopping guide, multiplied by `scale`

@@ -155,7 +155,7 @@ fn header(path: &Path, bytes: &[u8]) -> Result<(DenoiserConfig, Method, String, 
     // and those written before edge stopping existed have plain softmax kernels.
     if let Some(mskp) = config_json.get_mut("mskp").and_then(|v| v.as_object_mut()) {
         mskp.entry("compositor").or_insert_with(|| serde_json::json!(ScaleCompositor::ConvexBlend));
-        mskp.entry("edge_stopping").or_insert(serde_json::json!(false));
+        mskp.entry("edge_stopping").or_insert(serde_json::json!(crate::mskp::EdgeStopping::Off));
         mskp.entry("guides").or_insert(serde_json::json!([]));
     }
     let config: DenoiserConfig = serde_json::from_value(config_json).map_err(|e| bad(keys::CONFIG, e.to_string()))?;
