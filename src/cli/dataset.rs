@@ -39,8 +39,26 @@ pub struct DatasetArgs {
     /// Output folder (train/, val/, shots.jsonl, references.png).
     #[arg(short, long, default_value = "data/train-set")]
     pub output: PathBuf,
+    /// Make only the K-th of N disjoint parts (K = 1..N; shot i goes to part i mod N + 1), e.g.
+    /// one per Slurm array task or GNU parallel job. Each shot is the same as in a single run.
+    /// Merge: put the parts' train/ and val/ folders into one output folder (or let every part
+    /// write to the same shared folder) and run the same command without --shard: it finds
+    /// every shot made and writes the index and contact sheet.
+    #[arg(long, value_parser = parse_shard)]
+    pub shard: Option<(usize, usize)>,
     #[arg(short, long)]
     pub quiet: bool,
+}
+
+/// `K/N` with 1 ≤ K ≤ N → (K − 1, N).
+fn parse_shard(s: &str) -> std::result::Result<(usize, usize), String> {
+    let bad = || format!("--shard {s}: expected K/N with 1 <= K <= N, e.g. 3/8");
+    let (k, n) = s.split_once('/').ok_or_else(bad)?;
+    let (k, n): (usize, usize) = (k.trim().parse().map_err(|_| bad())?, n.trim().parse().map_err(|_| bad())?);
+    if k == 0 || n == 0 || k > n {
+        return Err(bad());
+    }
+    Ok((k - 1, n))
 }
 
 pub fn parse_size(s: &str) -> Result<(u32, u32)> {
@@ -98,15 +116,25 @@ pub fn run(a: DatasetArgs) -> Result<()> {
         jobs.push(Job { scene: i, split: "val", shot: 100_000 });
     }
     std::fs::create_dir_all(&a.output).with_context(|| format!("creating {}", a.output.display()))?;
+    // This part's shots: a fixed stride over the full job list, so the parts are disjoint,
+    // cover every shot, and each shot keeps its seed.
+    let mine: Vec<&Job> = match a.shard {
+        Some((k, n)) => jobs.iter().enumerate().filter(|(i, _)| i % n == k).map(|(_, j)| j).collect(),
+        None => jobs.iter().collect(),
+    };
 
-    let pb = progress::bar(jobs.len() as u64, "dataset shots");
+    let label = match a.shard {
+        Some((k, n)) => format!("dataset shots (part {}/{n})", k + 1),
+        None => "dataset shots".to_string(),
+    };
+    let pb = progress::bar(mine.len() as u64, &label);
     if a.quiet {
         pb.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
     let start = Instant::now();
     let (mut made, mut bytes) = (0u64, 0u64);
     let mut loaded: Option<(usize, Scene, Original)> = None;
-    for job in &jobs {
+    for job in mine.iter().copied() {
         let name = scene_name(&paths[job.scene]);
         let dir = a.output.join(job.split).join(format!("{name}_{:06}", job.shot));
         if dir.join("shot.json").exists() {
@@ -159,7 +187,7 @@ pub fn run(a: DatasetArgs) -> Result<()> {
     println!(
         "{} shots made ({} already there) in {:.1} s: {:.3} shots/s, {:.1} MiB written; index {}, references {}",
         made,
-        jobs.len() as u64 - made,
+        mine.len() as u64 - made,
         secs,
         made as f64 / secs.max(1e-9),
         bytes as f64 / (1 << 20) as f64,
