@@ -100,12 +100,13 @@ impl DenoiserConfig {
         c
     }
 
-    /// `default` with kernels at all five levels and edge-stopping kernels guided by the
-    /// auxiliary features (normal, depth and albedo in D_G, f_P in D_P; [`crate::mskp`]) with
-    /// joint-bilateral upsampling: the convex blend, so clear of the swap's patent.
+    /// `default` with kernels at all five levels and edge-stopping kernels guided by the colour
+    /// (brighter taps only) and the auxiliary features (normal, depth and albedo in D_G, f_P in
+    /// D_P; [`crate::mskp`]) with joint-bilateral upsampling: the convex blend, so clear of the
+    /// swap's patent.
     pub fn edge() -> Self {
         let mut c = Self::cpu_default();
-        c.mskp = c.mskp.map(|m| m.with_kernel_scales(5).with_edge_stopping(EdgeStopping::Features));
+        c.mskp = c.mskp.map(|m| m.with_kernel_scales(5).with_edge_stopping(EdgeStopping::FeaturesAndColour));
         c
     }
 

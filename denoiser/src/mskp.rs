@@ -126,6 +126,9 @@ pub enum ScaleCompositor {
 
 const CONV: usize = 3;
 
+/// Initial log-strength of every edge-stopping guide (see `MsKpConfig::init`).
+const GUIDE_STRENGTH_INIT: f32 = -6.0;
+
 impl MsKpConfig {
     fn levels(&self) -> usize {
         self.widths.len()
@@ -221,7 +224,17 @@ impl MsKpConfig {
                         init: Init::XavierUniform { gain: 1.0 },
                         weight_norm: false,
                     };
-                    Conv::new(spec, seed, 0x4d53_0300 + s as u64, device)
+                    let mut head = Conv::new(spec, seed, 0x4d53_0300 + s as u64, device);
+                    if !self.guides.is_empty() {
+                        // Guide strengths start near zero (e^−6): the column begins as plain
+                        // softmax kernels and learns where a guide can be trusted. Starting at
+                        // e^0 cut every tap wherever the G-buffer is noisy (behind glass, on
+                        // caustics), and 2900 steps did not unlearn it (docs/denoiser.md).
+                        let n = self.head_channels(s);
+                        let bias: Vec<f32> = (0..n).map(|i| if i + self.guides.len() >= n { GUIDE_STRENGTH_INIT } else { 0.0 }).collect();
+                        head.bias = burn::module::Param::from_tensor(Tensor::from_data(burn::tensor::TensorData::new(bias, [n]), device));
+                    }
+                    head
                 })
                 .collect(),
             margin: self.margin,
