@@ -313,7 +313,7 @@ fn checkerboard_is_color0_at_the_uv_origin_and_alternates_each_half_period() {
 }
 
 /// A white furnace: a unit sphere filling the view inside a constant environment of radiance 1,
-/// made of a conductor with η = 1, k = 20 (Fresnel reflectance 0.990) and the given specular
+/// made of a perfect-mirror conductor (`none`: η = 1, k = 10⁴) and the given specular
 /// reflectance element(s); 4 spp at 24 × 24.
 fn furnace(name: &str, bsdf: &str, reflectance: &str) -> renderer::film::Frame {
     let xml = format!(

@@ -200,11 +200,11 @@ impl Ctx {
         };
         let mean_base = base * base_tex.map_or(Vec3::ONE, |t| b.textures[t as usize].mean());
         let kind = if metallic >= 0.5 {
-            MaterialKind::Conductor { eta: Vec3::ONE, k: Vec3::splat(20.0), roughness: alpha, specular_tint: ColorParam::Const(mean_base) }
+            MaterialKind::Conductor { eta: Vec3::ONE, k: Vec3::splat(20.0), roughness: alpha, specular_tint: ColorParam::Const(mean_base), dist: Default::default() }
         } else if transmission >= 0.5 {
-            MaterialKind::Dielectric { ior, roughness: alpha, tint: mean_base }
+            MaterialKind::Dielectric { ior, roughness: alpha, tint: mean_base, dist: Default::default() }
         } else if roughness < 0.9 {
-            MaterialKind::Plastic { albedo, ior, roughness: alpha }
+            MaterialKind::Plastic { albedo, ior, roughness: alpha, dist: Default::default(), nonlinear: true }
         } else {
             MaterialKind::Lambert { albedo }
         };

@@ -4,7 +4,7 @@
 use crate::camera::Camera;
 use crate::geometry::{Accel, Hit, Mesh};
 use crate::light::{Environment, Lights};
-use crate::material::{Bsdf, MIN_ALPHA};
+use crate::material::{Bsdf, Distribution, MIN_ALPHA};
 use crate::math::Ray;
 use crate::texture::Texture;
 use crate::{Error, Result};
@@ -68,9 +68,10 @@ impl ColorParam {
 #[derive(Clone, Debug)]
 pub enum MaterialKind {
     Lambert { albedo: ColorParam },
-    Conductor { eta: Vec3, k: Vec3, roughness: f32, specular_tint: ColorParam },
-    Dielectric { ior: f32, roughness: f32, tint: Vec3 },
-    Plastic { albedo: ColorParam, ior: f32, roughness: f32 },
+    Conductor { eta: Vec3, k: Vec3, roughness: f32, specular_tint: ColorParam, dist: Distribution },
+    Dielectric { ior: f32, roughness: f32, tint: Vec3, dist: Distribution },
+    /// `nonlinear`: see `Bsdf::Plastic` (true in our formats; Mitsuba's `nonlinear`, default false).
+    Plastic { albedo: ColorParam, ior: f32, roughness: f32, dist: Distribution, nonlinear: bool },
 }
 
 /// A named material. `roughness` values above are GGX alpha. Non-zero `emission` makes every
@@ -104,13 +105,17 @@ impl Material {
         let alpha = |r: f32| if r < MIN_ALPHA { 0.0 } else { r.min(1.0) };
         match &self.kind {
             MaterialKind::Lambert { albedo } => Bsdf::Lambert { albedo: color(albedo).clamp(Vec3::ZERO, Vec3::ONE) },
-            MaterialKind::Conductor { eta, k, roughness, specular_tint } => {
-                Bsdf::Conductor { eta: *eta, k: *k, alpha: alpha(*roughness), specular_tint: color(specular_tint).min(Vec3::ONE) }
+            MaterialKind::Conductor { eta, k, roughness, specular_tint, dist } => {
+                Bsdf::Conductor { eta: *eta, k: *k, alpha: alpha(*roughness), specular_tint: color(specular_tint).min(Vec3::ONE), dist: *dist }
             }
-            MaterialKind::Dielectric { ior, roughness, tint } => Bsdf::Dielectric { eta: *ior, alpha: alpha(*roughness), tint: *tint },
-            MaterialKind::Plastic { albedo, ior, roughness } => {
-                Bsdf::Plastic { albedo: color(albedo).clamp(Vec3::ZERO, Vec3::ONE), eta: *ior, alpha: alpha(*roughness) }
-            }
+            MaterialKind::Dielectric { ior, roughness, tint, dist } => Bsdf::Dielectric { eta: *ior, alpha: alpha(*roughness), tint: *tint, dist: *dist },
+            MaterialKind::Plastic { albedo, ior, roughness, dist, nonlinear } => Bsdf::Plastic {
+                albedo: color(albedo).clamp(Vec3::ZERO, Vec3::ONE),
+                eta: *ior,
+                alpha: alpha(*roughness),
+                dist: *dist,
+                nonlinear: *nonlinear,
+            },
         }
     }
 }
