@@ -37,13 +37,6 @@ const ALPHA: f64 = 1e-3;
 const SEEDS: u32 = 16;
 const MITSUBA: &str = "mitsuba==3.9.1";
 
-/// Disagreements found and not yet fixed (docs/mitsuba-crosscheck.md, "Open"): these scenes'
-/// failures are printed as OPEN, not asserted, until fixed. Empty this list to see them fail.
-const OPEN: &[(&str, &str)] = &[
-    ("glass", "rough dielectric (GGX cube, Beckmann sphere): ours is 0.46 % brighter overall, up to 6.5 % over the cube"),
-    ("metals", "the wall above the checkerboard mirror slab: 4 % brighter in one 8x8 block (t = 5.1)"),
-];
-
 fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("renderer/ has a parent").to_path_buf()
 }
@@ -522,17 +515,8 @@ fn matches_mitsuba_pixel_by_pixel() {
         if only.as_deref().is_some_and(|o| !o.split(',').any(|n| n == case.name)) {
             continue;
         }
-        let (mut report, f) = check_case(&v.python, &case, &out_dir);
-        match OPEN.iter().find(|(n, _)| *n == case.name) {
-            Some((_, what)) if !f.is_empty() => {
-                writeln!(report, "  OPEN (known, not asserted): {what}").unwrap();
-                for line in &f {
-                    writeln!(report, "  OPEN: {line}").unwrap();
-                }
-            }
-            Some((_, what)) => writeln!(report, "  passes now; remove it from OPEN ({what})").unwrap(),
-            None => failures.extend(f),
-        }
+        let (report, f) = check_case(&v.python, &case, &out_dir);
+        failures.extend(f);
         print!("{report}");
         all.push_str(&report);
     }

@@ -215,7 +215,7 @@ impl Ctx {
         }
         let emission = check(b, "emission (factor × strength)", emission)?;
         let index = m.index().unwrap_or(0);
-        Ok(Material { name: m.name().map_or_else(|| format!("gltf material {index}"), str::to_string), kind, emission, two_sided_emission: m.double_sided() })
+        Ok(Material { name: m.name().map_or_else(|| format!("gltf material {index}"), str::to_string), kind, emission, two_sided_emission: m.double_sided(), one_sided: false })
     }
 
     fn texture(&mut self, b: &mut Builder, t: &gltf::Texture, field: &str) -> Result<u32> {

@@ -6,7 +6,8 @@
 //! element (`scene.xml: line 12 <bsdf type="hair">: unsupported BSDF type`), never a silent
 //! default: a scene that renders differently from what its author made would poison a test.
 //! The few things that are read but approximated (a textured dielectric or plastic specular
-//! reflectance becomes its mean, a one-sided diffuse becomes two-sided) print a warning.
+//! reflectance becomes its mean, anisotropic roughness becomes isotropic) print a warning.
+//! renderer/tests/mitsuba_crosscheck.rs renders scenes in both renderers and compares them.
 //! Texture lookups (`bitmap`, `checkerboard`) follow Mitsuba 3, which agrees with 0.6 on uv ≥ 0.
 
 use super::builder::{check_resolution, warn, Builder};
@@ -81,6 +82,8 @@ pub fn load(path: &Path) -> Result<SceneDescription> {
 struct BsdfDef {
     name: String,
     kind: MaterialKind,
+    /// Wrapped in `twosided`: shaded alike from both sides (else black from behind).
+    two_sided: bool,
 }
 
 /// A colour parameter: a constant or a texture node (resolved when the material is built),
@@ -592,13 +595,14 @@ impl<'a, 'i> Loader<'a, 'i> {
     fn bsdf(&mut self, n: Node<'a, 'i>, name: &str) -> Result<BsdfDef> {
         let ty = self.required(n, "type")?;
         if ty == "twosided" {
-            // Our BSDFs shade both sides alike, which is what twosided asks for.
+            // Shaded alike from both sides; a BSDF outside `twosided` is black from behind.
             let inner: Vec<_> = Self::elements(n).collect();
             return match inner.as_slice() {
-                [one] if one.tag_name().name() == "bsdf" => self.bsdf(*one, name),
+                [one] if one.tag_name().name() == "bsdf" => self.bsdf(*one, name).map(|d| BsdfDef { two_sided: true, ..d }),
                 [one] if one.tag_name().name() == "ref" => {
                     let id = self.required(*one, "id")?;
-                    self.bsdfs.get(&id).cloned().ok_or_else(|| self.err(*one, format!("no <bsdf id=\"{id}\"> defined before this")))
+                    let d = self.bsdfs.get(&id).cloned().ok_or_else(|| self.err(*one, format!("no <bsdf id=\"{id}\"> defined before this")))?;
+                    Ok(BsdfDef { two_sided: true, ..d })
                 }
                 _ => Err(self.err(n, "twosided needs exactly one nested <bsdf> (two different sides are not supported)")),
             };
@@ -725,7 +729,7 @@ impl<'a, 'i> Loader<'a, 'i> {
             }
             other => return Err(self.err(n, format!("unsupported BSDF type \"{other}\""))),
         };
-        Ok(BsdfDef { name: name.to_string(), kind })
+        Ok(BsdfDef { name: name.to_string(), kind, two_sided: false })
     }
 
     fn shape(&mut self, n: Node<'a, 'i>) -> Result<()> {
@@ -791,7 +795,7 @@ impl<'a, 'i> Loader<'a, 'i> {
         }
         // Mitsuba's default BSDF is a grey diffuse, but black on an emitter (Mitsuba 3's Shape).
         let default_albedo = if emission.is_some() { 0.0 } else { 0.5 };
-        let def = bsdf.unwrap_or_else(|| BsdfDef { name: "default".into(), kind: MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::splat(default_albedo)) } });
+        let def = bsdf.unwrap_or_else(|| BsdfDef { name: "default".into(), kind: MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::splat(default_albedo)) }, two_sided: false });
         let emission = emission.unwrap_or(Vec3::ZERO);
         let obj_path = match (ty.as_str(), filename) {
             ("obj", Some(file)) => Some(self.dir.join(file)),
@@ -855,12 +859,13 @@ impl<'a, 'i> Loader<'a, 'i> {
     /// BSDF without emission.
     fn material_for(&mut self, def: &BsdfDef, emission: Vec3) -> u32 {
         let name = if emission.max_element() > 0.0 { format!("{} (emitter {})", def.name, self.b.materials.len()) } else { def.name.clone() };
+        let one_sided = !def.two_sided;
         if emission.max_element() <= 0.0 {
-            if let Some(i) = self.b.materials.iter().position(|m| m.name == name && !m.is_emissive()) {
+            if let Some(i) = self.b.materials.iter().position(|m| m.name == name && !m.is_emissive() && m.one_sided == one_sided) {
                 return i as u32;
             }
         }
-        self.b.add_material(Material { name, kind: def.kind.clone(), emission, two_sided_emission: false })
+        self.b.add_material(Material { name, kind: def.kind.clone(), emission, two_sided_emission: false, one_sided })
     }
 
     fn environment(&self, n: Node<'a, 'i>) -> Result<Environment> {

@@ -83,6 +83,10 @@ pub struct Material {
     pub kind: MaterialKind,
     pub emission: Vec3,
     pub two_sided_emission: bool,
+    /// Reflect only on the front side (the winding normal's side), black from behind, as
+    /// Mitsuba's BSDFs are unless wrapped in `twosided`. False (both sides alike) in our formats;
+    /// transmissive BSDFs ignore it.
+    pub one_sided: bool,
 }
 
 impl Material {

@@ -517,7 +517,7 @@ fn material(check: &Check, b: &mut Builder, dir: &Path, name: &str, d: &Material
     if !emission.is_finite() {
         return Err(check.err(&f("strength"), "emission × strength overflows"));
     }
-    Ok(Material { name: name.to_string(), kind, emission, two_sided_emission: d.two_sided_emission.unwrap_or(false) })
+    Ok(Material { name: name.to_string(), kind, emission, two_sided_emission: d.two_sided_emission.unwrap_or(false), one_sided: false })
 }
 
 /// Rejects a procedural key on a shape type that does not read it (a typo must not pass silently).
