@@ -136,8 +136,8 @@ fn random_material(orig: &Material, rng: &mut Pcg32) -> Material {
         return m;
     }
     m.kind = match &orig.kind {
-        MaterialKind::Dielectric { ior, tint, .. } => MaterialKind::Dielectric { ior: *ior, roughness: roughness(rng), tint: *tint },
-        MaterialKind::Conductor { eta, k, specular_tint, .. } => MaterialKind::Conductor { eta: *eta, k: *k, roughness: roughness(rng), specular_tint: specular_tint.clone() },
+        MaterialKind::Dielectric { ior, tint, .. } => MaterialKind::Dielectric { ior: *ior, roughness: roughness(rng), tint: *tint, dist: Default::default() },
+        MaterialKind::Conductor { eta, k, specular_tint, .. } => MaterialKind::Conductor { eta: *eta, k: *k, roughness: roughness(rng), specular_tint: specular_tint.clone(), dist: Default::default() },
         MaterialKind::Lambert { albedo } | MaterialKind::Plastic { albedo, .. } => {
             let colour = Vec3::new(uniform(rng, 0.01, 1.0), uniform(rng, 0.01, 1.0), uniform(rng, 0.01, 1.0));
             // Keep textures half of the time: they carry the fine detail denoisers must keep.
@@ -148,7 +148,7 @@ fn random_material(orig: &Material, rng: &mut Pcg32) -> Material {
             if rng.next_f32() < 0.6 {
                 MaterialKind::Lambert { albedo }
             } else {
-                MaterialKind::Plastic { albedo, ior: uniform(rng, 1.3, 1.8), roughness: roughness(rng) }
+                MaterialKind::Plastic { albedo, ior: uniform(rng, 1.3, 1.8), roughness: roughness(rng), dist: Default::default(), nonlinear: true }
             }
         }
     };

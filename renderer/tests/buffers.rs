@@ -20,9 +20,9 @@ fn mixed_scene(w: u32, h: u32) -> renderer::scene::Scene {
     scene(
         vec![
             (quad(), Mat4::from_rotation_x(-FRAC_PI_2) * Mat4::from_scale(Vec3::splat(3.0)), lambert(0.6)),
-            (sphere(0.35, 24), Mat4::from_translation(Vec3::new(-0.6, 0.35, 0.0)), with_kind(MaterialKind::Plastic { albedo: ColorParam::Const(Vec3::new(0.1, 0.4, 0.8)), ior: 1.5, roughness: 0.05 })),
-            (sphere(0.35, 24), Mat4::from_translation(Vec3::new(0.0, 0.35, 0.0)), with_kind(MaterialKind::Conductor { eta: Vec3::new(0.2, 0.9, 1.1), k: Vec3::new(3.9, 2.4, 2.2), roughness: 0.15, specular_tint: ColorParam::Const(Vec3::ONE) })),
-            (sphere(0.35, 24), Mat4::from_translation(Vec3::new(0.6, 0.35, 0.0)), with_kind(MaterialKind::Dielectric { ior: 1.5, roughness: 0.0, tint: Vec3::ONE })),
+            (sphere(0.35, 24), Mat4::from_translation(Vec3::new(-0.6, 0.35, 0.0)), with_kind(MaterialKind::Plastic { albedo: ColorParam::Const(Vec3::new(0.1, 0.4, 0.8)), ior: 1.5, roughness: 0.05, dist: Default::default(), nonlinear: true })),
+            (sphere(0.35, 24), Mat4::from_translation(Vec3::new(0.0, 0.35, 0.0)), with_kind(MaterialKind::Conductor { eta: Vec3::new(0.2, 0.9, 1.1), k: Vec3::new(3.9, 2.4, 2.2), roughness: 0.15, specular_tint: ColorParam::Const(Vec3::ONE), dist: Default::default() })),
+            (sphere(0.35, 24), Mat4::from_translation(Vec3::new(0.6, 0.35, 0.0)), with_kind(MaterialKind::Dielectric { ior: 1.5, roughness: 0.0, tint: Vec3::ONE, dist: Default::default() })),
             (quad(), Mat4::from_translation(Vec3::new(0.0, 2.0, 0.0)) * Mat4::from_rotation_x(FRAC_PI_2) * Mat4::from_scale(Vec3::splat(0.5)), emitter(Vec3::splat(10.0))),
         ],
         Environment::Constant(Vec3::splat(0.3)),
@@ -125,7 +125,7 @@ fn gbuffers_look_through_a_mirror() {
     // Camera looks down −Z at a mirror tilted 45° that reflects the view up (+Y) onto a red
     // sphere: the G-buffers must show the sphere, not the mirror.
     let cam = camera(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, 10.0, 16, 16);
-    let mirror = with_kind(MaterialKind::Conductor { eta: Vec3::new(0.155, 0.117, 0.138), k: Vec3::new(4.83, 3.12, 2.15), roughness: 0.0, specular_tint: ColorParam::Const(Vec3::ONE) });
+    let mirror = with_kind(MaterialKind::Conductor { eta: Vec3::new(0.155, 0.117, 0.138), k: Vec3::new(4.83, 3.12, 2.15), roughness: 0.0, specular_tint: ColorParam::Const(Vec3::ONE), dist: Default::default() });
     let red = with_kind(MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::new(0.8, 0.1, 0.1)) });
     let s = scene(
         vec![

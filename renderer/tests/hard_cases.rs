@@ -77,14 +77,14 @@ fn camera_inside_a_closed_mesh() {
 #[test]
 fn extreme_material_parameters() {
     let mats = [
-        MaterialKind::Dielectric { ior: 1.0, roughness: 0.0, tint: Vec3::ONE },
-        MaterialKind::Dielectric { ior: 1.0, roughness: 0.5, tint: Vec3::ONE },
-        MaterialKind::Dielectric { ior: 1.5, roughness: 1.0, tint: Vec3::ONE },
-        MaterialKind::Dielectric { ior: 2.4, roughness: 1e-4, tint: Vec3::ONE },
-        MaterialKind::Conductor { eta: Vec3::splat(0.2), k: Vec3::splat(3.0), roughness: 0.0, specular_tint: ColorParam::Const(Vec3::ONE) },
-        MaterialKind::Conductor { eta: Vec3::splat(0.2), k: Vec3::splat(3.0), roughness: 1.0, specular_tint: ColorParam::Const(Vec3::ONE) },
-        MaterialKind::Plastic { albedo: ColorParam::Const(Vec3::ONE), ior: 1.5, roughness: 0.0 },
-        MaterialKind::Plastic { albedo: ColorParam::Const(Vec3::ZERO), ior: 1.5, roughness: 1.0 },
+        MaterialKind::Dielectric { ior: 1.0, roughness: 0.0, tint: Vec3::ONE, dist: Default::default() },
+        MaterialKind::Dielectric { ior: 1.0, roughness: 0.5, tint: Vec3::ONE, dist: Default::default() },
+        MaterialKind::Dielectric { ior: 1.5, roughness: 1.0, tint: Vec3::ONE, dist: Default::default() },
+        MaterialKind::Dielectric { ior: 2.4, roughness: 1e-4, tint: Vec3::ONE, dist: Default::default() },
+        MaterialKind::Conductor { eta: Vec3::splat(0.2), k: Vec3::splat(3.0), roughness: 0.0, specular_tint: ColorParam::Const(Vec3::ONE), dist: Default::default() },
+        MaterialKind::Conductor { eta: Vec3::splat(0.2), k: Vec3::splat(3.0), roughness: 1.0, specular_tint: ColorParam::Const(Vec3::ONE), dist: Default::default() },
+        MaterialKind::Plastic { albedo: ColorParam::Const(Vec3::ONE), ior: 1.5, roughness: 0.0, dist: Default::default(), nonlinear: true },
+        MaterialKind::Plastic { albedo: ColorParam::Const(Vec3::ZERO), ior: 1.5, roughness: 1.0, dist: Default::default(), nonlinear: true },
         MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::ZERO) },
     ];
     for (k, kind) in mats.into_iter().enumerate() {
@@ -115,7 +115,7 @@ fn grazing_rays_along_a_plane() {
     // The camera sits exactly in the plane of a quad: every ray grazes or misses it.
     let cam = camera(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 30.0, 16, 16);
     let s = scene(
-        vec![(quad(), Mat4::from_rotation_x(-FRAC_PI_2), lambert(0.5)), (quad(), Mat4::from_rotation_x(-FRAC_PI_2) * Mat4::from_translation(Vec3::new(0.0, 0.0, 1e-6)), with_kind(MaterialKind::Dielectric { ior: 1.5, roughness: 0.0, tint: Vec3::ONE }))],
+        vec![(quad(), Mat4::from_rotation_x(-FRAC_PI_2), lambert(0.5)), (quad(), Mat4::from_rotation_x(-FRAC_PI_2) * Mat4::from_translation(Vec3::new(0.0, 0.0, 1e-6)), with_kind(MaterialKind::Dielectric { ior: 1.5, roughness: 0.0, tint: Vec3::ONE, dist: Default::default() }))],
         Environment::Constant(Vec3::ONE),
         cam,
         vec![],

@@ -326,7 +326,7 @@ fn conductor_presets_and_defaults() {
     assert!(!d.settings.russian_roulette);
     let get = |n: &str| d.materials.iter().find(|m| m.name == n).unwrap().kind.clone();
     match get("au") {
-        MaterialKind::Conductor { eta, k, roughness, specular_tint: ColorParam::Const(specular_tint) } => {
+        MaterialKind::Conductor { eta, k, roughness, specular_tint: ColorParam::Const(specular_tint), .. } => {
             // Gold reflects red more than blue: its k falls from red to blue.
             assert!(k.x > k.z && eta.z > eta.x);
             assert_eq!((roughness, specular_tint), (0.2, Vec3::ONE));

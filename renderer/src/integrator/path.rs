@@ -120,6 +120,10 @@ pub fn trace(scene: &Scene, ray: Ray, rng: &mut Pcg32, max_bounces: u32, russian
         }
 
         let bsdf = material.bsdf(si.uv, &scene.textures);
+        if material.one_sided && !bsdf.is_transmissive() && wo_world.dot(si.ng) < 0.0 {
+            // A one-sided surface (Mitsuba's BSDFs outside `twosided`) is black from behind.
+            break;
+        }
         // Reflection-only BSDFs are two-sided: orient both normals towards the viewer.
         // Dielectrics keep the geometric orientation, which tells inside from outside.
         let (mut ng, mut ns) = (si.ng, si.ns);

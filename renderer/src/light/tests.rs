@@ -13,6 +13,7 @@ fn material(emission: Vec3, two_sided: bool) -> Material {
         kind: MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::splat(0.5)) },
         emission,
         two_sided_emission: two_sided,
+        one_sided: false,
     }
 }
 

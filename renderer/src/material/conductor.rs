@@ -1,8 +1,8 @@
-//! Conductors: a delta mirror when smooth, GGX with visible-normal sampling when rough.
+//! Conductors: a delta mirror when smooth, GGX or Beckmann with visible-normal sampling when rough.
 //! Reflection only (wo.z > 0 after the integrator's flip).
 
 use super::fresnel;
-use super::microfacet::Ggx;
+use super::microfacet::{Distribution, Microfacet};
 use super::{BsdfSample, Lobe, LobeKind, MIN_ALPHA};
 use glam::{Vec2, Vec3};
 
@@ -12,6 +12,7 @@ pub struct Conductor {
     pub k: Vec3,
     pub alpha: f32,
     pub tint: Vec3,
+    pub dist: Distribution,
 }
 
 impl Conductor {
@@ -33,7 +34,7 @@ impl Conductor {
             let wi = Vec3::new(-wo.x, -wo.y, wo.z);
             return Some(BsdfSample { wi, weight: f, f_cos: f, pdf: 1.0, lobe, eta: 1.0 });
         }
-        let ggx = Ggx::new(self.alpha);
+        let ggx = Microfacet::new(self.alpha, self.dist);
         let m = ggx.sample_visible(wo, u);
         let cos_om = wo.dot(m);
         if !(cos_om > 0.0) {
@@ -60,7 +61,7 @@ impl Conductor {
         if !(m.z > 0.0) {
             return Vec3::ZERO;
         }
-        let ggx = Ggx::new(self.alpha);
+        let ggx = Microfacet::new(self.alpha, self.dist);
         self.fresnel(wo.dot(m)) * (ggx.d(m) * ggx.g2(wo, wi) / (4.0 * wo.z))
     }
 
@@ -73,7 +74,7 @@ impl Conductor {
         if !(m.z > 0.0) || !(cos_om > 0.0) {
             return 0.0;
         }
-        Ggx::new(self.alpha).pdf_visible(wo, m) / (4.0 * cos_om)
+        Microfacet::new(self.alpha, self.dist).pdf_visible(wo, m) / (4.0 * cos_om)
     }
 
     /// Normal-incidence reflectance × tint, clamped to [0, 1].

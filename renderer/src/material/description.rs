@@ -3,7 +3,7 @@
 //! the scene loaders and the light structures (emissive triangles) use these, so they live here
 //! rather than in `scene`.
 
-use super::{Bsdf, MIN_ALPHA};
+use super::{Bsdf, Distribution, MIN_ALPHA};
 use crate::texture::Texture;
 use glam::{Affine2, Vec2, Vec3};
 
@@ -53,9 +53,10 @@ impl ColorParam {
 #[derive(Clone, Debug)]
 pub enum MaterialKind {
     Lambert { albedo: ColorParam },
-    Conductor { eta: Vec3, k: Vec3, roughness: f32, specular_tint: ColorParam },
-    Dielectric { ior: f32, roughness: f32, tint: Vec3 },
-    Plastic { albedo: ColorParam, ior: f32, roughness: f32 },
+    Conductor { eta: Vec3, k: Vec3, roughness: f32, specular_tint: ColorParam, dist: Distribution },
+    Dielectric { ior: f32, roughness: f32, tint: Vec3, dist: Distribution },
+    /// `nonlinear`: see `Bsdf::Plastic` (true in our formats; Mitsuba's `nonlinear`, default false).
+    Plastic { albedo: ColorParam, ior: f32, roughness: f32, dist: Distribution, nonlinear: bool },
 }
 
 /// A named material. `roughness` values above are GGX alpha. Non-zero `emission` makes every
@@ -67,6 +68,10 @@ pub struct Material {
     pub kind: MaterialKind,
     pub emission: Vec3,
     pub two_sided_emission: bool,
+    /// Reflect only on the front side (the winding normal's side), black from behind, as
+    /// Mitsuba's BSDFs are unless wrapped in `twosided`. False (both sides alike) in our formats;
+    /// transmissive BSDFs ignore it.
+    pub one_sided: bool,
 }
 
 impl Material {
@@ -89,13 +94,17 @@ impl Material {
         let alpha = |r: f32| if r < MIN_ALPHA { 0.0 } else { r.min(1.0) };
         match &self.kind {
             MaterialKind::Lambert { albedo } => Bsdf::Lambert { albedo: color(albedo).clamp(Vec3::ZERO, Vec3::ONE) },
-            MaterialKind::Conductor { eta, k, roughness, specular_tint } => {
-                Bsdf::Conductor { eta: *eta, k: *k, alpha: alpha(*roughness), specular_tint: color(specular_tint).min(Vec3::ONE) }
+            MaterialKind::Conductor { eta, k, roughness, specular_tint, dist } => {
+                Bsdf::Conductor { eta: *eta, k: *k, alpha: alpha(*roughness), specular_tint: color(specular_tint).min(Vec3::ONE), dist: *dist }
             }
-            MaterialKind::Dielectric { ior, roughness, tint } => Bsdf::Dielectric { eta: *ior, alpha: alpha(*roughness), tint: *tint },
-            MaterialKind::Plastic { albedo, ior, roughness } => {
-                Bsdf::Plastic { albedo: color(albedo).clamp(Vec3::ZERO, Vec3::ONE), eta: *ior, alpha: alpha(*roughness) }
-            }
+            MaterialKind::Dielectric { ior, roughness, tint, dist } => Bsdf::Dielectric { eta: *ior, alpha: alpha(*roughness), tint: *tint, dist: *dist },
+            MaterialKind::Plastic { albedo, ior, roughness, dist, nonlinear } => Bsdf::Plastic {
+                albedo: color(albedo).clamp(Vec3::ZERO, Vec3::ONE),
+                eta: *ior,
+                alpha: alpha(*roughness),
+                dist: *dist,
+                nonlinear: *nonlinear,
+            },
         }
     }
 }

@@ -1,5 +1,5 @@
 //! Dielectrics (glass): smooth (delta reflection + delta refraction chosen by Fresnel) and rough
-//! GGX (Walter et al. 2007 with visible-normal sampling).
+//! GGX or Beckmann (Walter et al. 2007 with visible-normal sampling).
 //!
 //! The frame is not flipped: wo.z > 0 means outside, `eta` = interior/exterior. Transmitted
 //! radiance is scaled by (η_o/η_i)², η_o on wo's side and η_i on wi's side (the side the path
@@ -7,7 +7,7 @@
 //! `BsdfSample::eta` reports η_o/η_i for transmission.
 
 use super::fresnel;
-use super::microfacet::Ggx;
+use super::microfacet::{Distribution, Microfacet};
 use super::{BsdfSample, Lobe, LobeKind, MIN_ALPHA};
 use glam::{Vec2, Vec3};
 
@@ -20,6 +20,7 @@ pub struct Dielectric {
     pub eta: f32,
     pub alpha: f32,
     pub tint: Vec3,
+    pub dist: Distribution,
 }
 
 const SPEC_R: Lobe = Lobe { kind: LobeKind::Specular, transmission: false, roughness: 0.0 };
@@ -65,7 +66,7 @@ impl Dielectric {
         if wo.z == 0.0 {
             return None;
         }
-        let ggx = Ggx::new(self.alpha);
+        let ggx = Microfacet::new(self.alpha, self.dist);
         let m = ggx.sample_visible(wo, u);
         let cos_om = wo.dot(m);
         if !(cos_om * wo.z > 0.0) {
@@ -136,7 +137,7 @@ impl Dielectric {
             return Vec3::ZERO;
         }
         let Some((m, etap)) = self.half_vector(wo, wi) else { return Vec3::ZERO };
-        let ggx = Ggx::new(self.alpha);
+        let ggx = Microfacet::new(self.alpha, self.dist);
         let cos_om = wo.dot(m);
         let f = fresnel::dielectric(cos_om, self.eta);
         let dg = ggx.d(m) * ggx.g2(wo, wi);
@@ -156,7 +157,7 @@ impl Dielectric {
             return 0.0;
         }
         let Some((m, etap)) = self.half_vector(wo, wi) else { return 0.0 };
-        let ggx = Ggx::new(self.alpha);
+        let ggx = Microfacet::new(self.alpha, self.dist);
         let cos_om = wo.dot(m);
         let f = fresnel::dielectric(cos_om, self.eta);
         let pdf_m = ggx.pdf_visible(wo, m);

@@ -29,6 +29,7 @@ use conductor::Conductor;
 pub use description::{ColorParam, Material, MaterialKind};
 use dielectric::Dielectric;
 use plastic::Plastic;
+pub use microfacet::Distribution;
 
 /// What kind of lobe produced a sample; mirrors the renderer bitmask of method.md §1.1.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -85,13 +86,16 @@ pub struct BsdfSample {
 pub enum Bsdf {
     /// Lambertian reflector, albedo in [0,1].
     Lambert { albedo: Vec3 },
-    /// Metal with complex IOR (eta, k) per RGB channel; `alpha` is GGX roughness, 0 = smooth.
-    Conductor { eta: Vec3, k: Vec3, alpha: f32, specular_tint: Vec3 },
-    /// Glass with IOR `eta` = interior/exterior; `alpha` GGX roughness (0 = smooth);
+    /// Metal with complex IOR (eta, k) per RGB channel; `alpha` is the roughness of the
+    /// microfacet distribution `dist` (GGX or Beckmann), 0 = smooth.
+    Conductor { eta: Vec3, k: Vec3, alpha: f32, specular_tint: Vec3, dist: Distribution },
+    /// Glass with IOR `eta` = interior/exterior; `alpha` roughness of `dist` (0 = smooth);
     /// `tint` multiplies transmission and reflection (1 = clear).
-    Dielectric { eta: f32, alpha: f32, tint: Vec3 },
-    /// Lambertian base under a dielectric coat of IOR `eta` and GGX roughness `alpha` (0 = smooth).
-    Plastic { albedo: Vec3, eta: f32, alpha: f32 },
+    Dielectric { eta: f32, alpha: f32, tint: Vec3, dist: Distribution },
+    /// Lambertian base under a dielectric coat of IOR `eta` and roughness `alpha` of `dist`
+    /// (0 = smooth); `nonlinear` picks how the base's inter-reflections scale its albedo
+    /// (plastic.rs; true for our scenes, false for Mitsuba's default plastic).
+    Plastic { albedo: Vec3, eta: f32, alpha: f32, dist: Distribution, nonlinear: bool },
 }
 
 /// The contribution of `eval` split into the diffuse lobe and everything else (method.md §1.3:
@@ -217,18 +221,20 @@ impl Bsdf {
         let alpha = |a: f32| if a.is_finite() { a.clamp(0.0, 1.0) } else { 0.0 };
         match *self {
             Bsdf::Lambert { albedo } => Resolved::Lambert(colour(albedo).min(Vec3::ONE)),
-            Bsdf::Conductor { eta, k, alpha: a, specular_tint } => Resolved::Conductor(Conductor {
+            Bsdf::Conductor { eta, k, alpha: a, specular_tint, dist } => Resolved::Conductor(Conductor {
                 eta: if is_finite3(eta) { eta } else { Vec3::ONE },
                 k: colour(k),
                 alpha: alpha(a),
                 tint: colour(specular_tint),
+                dist,
             }),
-            Bsdf::Dielectric { eta, alpha: a, tint } => Resolved::Dielectric(Dielectric {
+            Bsdf::Dielectric { eta, alpha: a, tint, dist } => Resolved::Dielectric(Dielectric {
                 eta: if eta.is_finite() && eta > 0.0 { eta } else { 1.0 },
                 alpha: alpha(a),
                 tint: colour(tint),
+                dist,
             }),
-            Bsdf::Plastic { albedo, eta, alpha } => Resolved::Plastic(Plastic::new(colour(albedo), eta, alpha)),
+            Bsdf::Plastic { albedo, eta, alpha, dist, nonlinear } => Resolved::Plastic(Plastic::new(colour(albedo), eta, alpha, dist, nonlinear)),
         }
     }
 

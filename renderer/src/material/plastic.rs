@@ -3,17 +3,22 @@
 //! Smooth coat (Mitsuba's `plastic`): a delta mirror lobe weighted by F(cos θo), plus the base
 //! seen through the coat, ρ/(1 − ρ·F_dr,int) · (1 − F(cos θo))(1 − F(cos θi))/η² · cos θi/π,
 //! where the 1/(1 − ρ F_dr,int) sums the light bouncing between base and coat.
-//! Rough coat (in the style of Mitsuba's `roughplastic`): GGX reflection with dielectric Fresnel,
-//! plus the same diffuse term with 1 − F replaced by 1 − E(cos θ), E the directional albedo of the
-//! GGX coat lobe (tabulated once), and F_dr,int by the matching internal reflectance.
+//! Rough coat (in the style of Mitsuba's `roughplastic`): GGX or Beckmann reflection with
+//! dielectric Fresnel, plus the same diffuse term with 1 − F replaced by 1 − E(cos θ), E the
+//! directional albedo of the coat lobe (tabulated once per distribution), and F_dr,int by the
+//! matching internal reflectance.
 //!
-//! Energy: the internal reflectance is derived from the external one by the reciprocity relation
-//! 1 − R_int = (1 − R_ext)/η², so for ρ = 1 the diffuse term carries exactly 1 − E(cos θo) and
-//! coat + base never exceed 1 (up to the tabulation error of E, ~1e-4).
+//! That is the `nonlinear` form (Mitsuba's `nonlinear = true`; our TOML and glTF plastics). The
+//! linear form, Mitsuba's default, divides by (1 − F_dr,int) instead of (1 − ρ·F_dr,int), so
+//! that the diffuse colour stays close to ρ.
+//!
+//! Energy (nonlinear form): the internal reflectance is derived from the external one by the
+//! reciprocity relation 1 − R_int = (1 − R_ext)/η², so for ρ = 1 the diffuse term carries
+//! exactly 1 − E(cos θo) and coat + base never exceed 1 (up to the tabulation error of E, ~1e-4).
 //! The coat IOR is clamped to [1, 3] (the table range) and alpha to [0, 1].
 
 use super::fresnel;
-use super::microfacet::Ggx;
+use super::microfacet::{Distribution, Microfacet};
 use super::{BsdfSample, Lobe, LobeKind, SplitEval, MIN_ALPHA};
 use crate::math::INV_PI;
 use crate::sampling::square_to_cosine_hemisphere;
@@ -43,18 +48,21 @@ fn eta_node(i: usize, n: usize) -> f32 {
 }
 
 /// Directional albedo of the GGX coat lobe (reflection only) for incidence cosine `mu`.
-fn coat_albedo_quadrature(mu: f32, alpha: f32, eta: f32) -> f32 {
+fn coat_albedo_quadrature(mu: f32, alpha: f32, eta: f32, dist: Distribution) -> f32 {
     if alpha < MIN_ALPHA {
         return fresnel::dielectric(mu, eta);
     }
     let mu = mu.max(1e-4);
     let wo = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
-    let ggx = Ggx::new(alpha);
+    let ggx = Microfacet::new(alpha, dist);
     let g1 = ggx.g1(wo);
     let mut sum = 0.0f64;
-    for a in 0..QUAD {
-        for b in 0..QUAD {
-            let u = Vec2::new((a as f32 + 0.5) / QUAD as f32, (b as f32 + 0.5) / QUAD as f32);
+    // Beckmann's visible normals are sampled by a numerical inversion, ~10x GGX's cost: a coarser
+    // grid keeps its tables to a second or two (error ~5e-4).
+    let quad = if dist == Distribution::Beckmann { QUAD / 2 } else { QUAD };
+    for a in 0..quad {
+        for b in 0..quad {
+            let u = Vec2::new((a as f32 + 0.5) / quad as f32, (b as f32 + 0.5) / quad as f32);
             let m = ggx.sample_visible(wo, u);
             let wi = crate::math::reflect(wo, m);
             if wi.z > 0.0 {
@@ -62,12 +70,17 @@ fn coat_albedo_quadrature(mu: f32, alpha: f32, eta: f32) -> f32 {
             }
         }
     }
-    (sum / (QUAD * QUAD) as f64) as f32
+    (sum / (quad * quad) as f64) as f32
 }
 
-fn tables() -> &'static Tables {
-    static T: OnceLock<Tables> = OnceLock::new();
-    T.get_or_init(|| {
+fn tables(dist: Distribution) -> &'static Tables {
+    static GGX: OnceLock<Tables> = OnceLock::new();
+    static BECKMANN: OnceLock<Tables> = OnceLock::new();
+    let cell = match dist {
+        Distribution::Ggx => &GGX,
+        Distribution::Beckmann => &BECKMANN,
+    };
+    cell.get_or_init(|| {
         let mut e = Vec::with_capacity(N_ETA * N_ALPHA * N_MU);
         let mut e_avg = Vec::with_capacity(N_ETA * N_ALPHA);
         // 3-point Gauss–Legendre per μ-segment: the interpolant is linear in x = √μ, so the
@@ -80,7 +93,7 @@ fn tables() -> &'static Tables {
                 let row: Vec<f32> = (0..N_MU)
                     .map(|k| {
                         let x = k as f32 / (N_MU - 1) as f32;
-                        coat_albedo_quadrature(x * x, alpha, eta)
+                        coat_albedo_quadrature(x * x, alpha, eta, dist)
                     })
                     .collect();
                 let h = 1.0 / (N_MU - 1) as f64;
@@ -115,6 +128,39 @@ fn tables() -> &'static Tables {
     })
 }
 
+/// The rough coat's internal reflectance as Mitsuba's `roughplastic` computes it (the linear
+/// form's divisor): the cosine-weighted hemispherical average 2∫E(μ)μ dμ of the coat lobe's
+/// directional albedo seen from inside (relative IOR 1/η, total internal reflection included),
+/// rather than our reciprocity relation from the outside albedo (which books the energy the
+/// single-scattering lobe loses as transmitted). Computed once per (η, α, distribution) and
+/// cached: Mitsuba scenes have a handful of plastics.
+fn mitsuba_internal_reflectance(eta: f32, alpha: f32, dist: Distribution) -> f32 {
+    use std::collections::HashMap;
+    use std::sync::RwLock;
+    static CACHE: OnceLock<RwLock<HashMap<(u32, u32, bool), f32>>> = OnceLock::new();
+    let cache = CACHE.get_or_init(|| RwLock::new(HashMap::new()));
+    let key = (eta.to_bits(), alpha.to_bits(), dist == Distribution::Beckmann);
+    if let Some(&v) = cache.read().unwrap_or_else(|e| e.into_inner()).get(&key) {
+        return v;
+    }
+    // Gauss–Legendre in x = √μ over 16 segments (the albedo changes fastest near grazing).
+    let gl = [(-0.774_596_7f64, 5.0 / 9.0), (0.0, 8.0 / 9.0), (0.774_596_7, 5.0 / 9.0)];
+    let segments = 16;
+    let h = 1.0 / segments as f64;
+    let mut avg = 0.0f64;
+    for k in 0..segments {
+        for (g, w) in gl {
+            let x = (k as f64 + 0.5 * (g + 1.0)) * h;
+            let mu = x * x;
+            // 2∫E(μ)μ dμ = ∫ 4 E(x²) x³ dx.
+            avg += 0.5 * h * w * 4.0 * coat_albedo_quadrature(mu as f32, alpha, 1.0 / eta, dist) as f64 * x * x * x;
+        }
+    }
+    let v = (avg as f32).clamp(0.0, 1.0);
+    cache.write().unwrap_or_else(|e| e.into_inner()).insert(key, v);
+    v
+}
+
 /// Cell index and fraction of coordinate `x` on a grid of `n` nodes spaced 1 apart.
 fn cell(x: f32, n: usize) -> (usize, f32) {
     let x = x.clamp(0.0, (n - 1) as f32);
@@ -131,13 +177,15 @@ pub struct Plastic {
     albedo: Vec3,
     eta: f32,
     alpha: f32,
+    dist: Distribution,
+    nonlinear: bool,
 }
 
 impl Plastic {
-    pub fn new(albedo: Vec3, eta: f32, alpha: f32) -> Self {
+    pub fn new(albedo: Vec3, eta: f32, alpha: f32, dist: Distribution, nonlinear: bool) -> Self {
         let eta = if eta.is_finite() { eta.clamp(1.0, ETA_MAX) } else { 1.5 };
         let alpha = if alpha.is_finite() { alpha.clamp(0.0, 1.0) } else { 0.0 };
-        Plastic { albedo: albedo.clamp(Vec3::ZERO, Vec3::ONE), eta, alpha }
+        Plastic { albedo: albedo.clamp(Vec3::ZERO, Vec3::ONE), eta, alpha, dist, nonlinear }
     }
 
     fn smooth(&self) -> bool {
@@ -153,7 +201,7 @@ impl Plastic {
         if self.smooth() {
             return fresnel::dielectric(mu, self.eta);
         }
-        let t = tables();
+        let t = tables(self.dist);
         let (i, fi) = cell(self.eta_coord() * (N_ETA - 1) as f32, N_ETA);
         let (j, fj) = cell(self.alpha * (N_ALPHA - 1) as f32, N_ALPHA);
         let (k, fk) = cell(mu.clamp(0.0, 1.0).sqrt() * (N_MU - 1) as f32, N_MU);
@@ -167,7 +215,10 @@ impl Plastic {
 
     /// Diffuse reflectance of the coat seen from inside (light trying to leave the base layer).
     fn internal_reflectance(&self) -> f32 {
-        let t = tables();
+        if !self.nonlinear && !self.smooth() {
+            return mitsuba_internal_reflectance(self.eta, self.alpha, self.dist);
+        }
+        let t = tables(self.dist);
         let ext = if self.smooth() {
             let (i, f) = cell(self.eta_coord() * (N_FDR - 1) as f32, N_FDR);
             // Biased low by a hair: underestimating R_int can only lower the diffuse energy.
@@ -182,8 +233,12 @@ impl Plastic {
     }
 
     /// ρ/(1 − ρ R_int)/η²: base albedo with inter-reflections, and the solid-angle compression.
+    /// Linear (`nonlinear` false, Mitsuba's default): ρ/(1 − R_int)/η², which keeps the diffuse
+    /// colour close to ρ itself (Mitsuba's "preserve the texture colours") at the price of
+    /// energy conservation: coat + base can reflect a little more than 1 for ρ near 1.
     fn diffuse_gain(&self, r_int: f32) -> Vec3 {
-        self.albedo / (Vec3::ONE - self.albedo * r_int).max(Vec3::splat(1e-6)) / (self.eta * self.eta)
+        let k = if self.nonlinear { self.albedo } else { Vec3::ONE };
+        self.albedo / (Vec3::ONE - k * r_int).max(Vec3::splat(1e-6)) / (self.eta * self.eta)
     }
 
     /// Probability of sampling the coat lobe: its share of the estimated reflected energy.
@@ -204,7 +259,7 @@ impl Plastic {
         if self.smooth() || !(m.z > 0.0) {
             return 0.0;
         }
-        let ggx = Ggx::new(self.alpha);
+        let ggx = Microfacet::new(self.alpha, self.dist);
         fresnel::dielectric(wo.dot(m), self.eta) * ggx.d(m) * ggx.g2(wo, wi) / (4.0 * wo.z)
     }
 
@@ -223,7 +278,7 @@ impl Plastic {
         if self.smooth() || !(m.z > 0.0) || !(cos_om > 0.0) {
             return 0.0;
         }
-        Ggx::new(self.alpha).pdf_visible(wo, m) / (4.0 * cos_om)
+        Microfacet::new(self.alpha, self.dist).pdf_visible(wo, m) / (4.0 * cos_om)
     }
 
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
@@ -247,7 +302,7 @@ impl Plastic {
             return Some(BsdfSample { wi, weight: Vec3::splat(f / p), f_cos: Vec3::splat(f), pdf: p, lobe, eta: 1.0 });
         }
         let (wi, lobe) = if coat {
-            let m = Ggx::new(self.alpha).sample_visible(wo, u);
+            let m = Microfacet::new(self.alpha, self.dist).sample_visible(wo, u);
             (crate::math::reflect(wo, m), Lobe { kind: LobeKind::Glossy, transmission: false, roughness: self.alpha })
         } else {
             (square_to_cosine_hemisphere(u), Lobe { kind: LobeKind::Diffuse, transmission: false, roughness: 1.0 })

@@ -127,7 +127,7 @@ struct Config {
 }
 
 fn conductor(alpha: f32) -> Bsdf {
-    Bsdf::Conductor { eta: GOLD_ETA, k: GOLD_K, alpha, specular_tint: Vec3::ONE }
+    Bsdf::Conductor { eta: GOLD_ETA, k: GOLD_K, alpha, specular_tint: Vec3::ONE, dist: Default::default() }
 }
 
 fn chi2_configs(group: &str) -> Vec<Config> {
@@ -145,6 +145,10 @@ fn chi2_configs(group: &str) -> Vec<Config> {
             for alpha in [0.002, 0.05, 0.3, 1.0] {
                 push(format!("conductor a={alpha}"), conductor(alpha), &[1.0]);
             }
+            for alpha in [0.05, 0.3, 1.0] {
+                let bsdf = Bsdf::Conductor { eta: GOLD_ETA, k: GOLD_K, alpha, specular_tint: Vec3::ONE, dist: Distribution::Beckmann };
+                push(format!("beckmann conductor a={alpha}"), bsdf, &[1.0]);
+            }
         }
         "dielectric_out" | "dielectric_in" => {
             let sign = if group == "dielectric_out" { 1.0 } else { -1.0 };
@@ -152,14 +156,14 @@ fn chi2_configs(group: &str) -> Vec<Config> {
                 // 1.05 stands for "nearly index-matched": at 1.01 the transmitted lobe is so
                 // narrow that integrating the pdf over the cells alone takes minutes.
                 for eta in [1.05, 1.33, 1.5, 2.4] {
-                    let bsdf = Bsdf::Dielectric { eta, alpha, tint: Vec3::new(1.0, 0.9, 0.8) };
+                    let bsdf = Bsdf::Dielectric { eta, alpha, tint: Vec3::new(1.0, 0.9, 0.8), dist: Default::default() };
                     push(format!("dielectric a={alpha} eta={eta}"), bsdf, &[sign]);
                 }
             }
         }
         "plastic" => {
             for alpha in [0.0, 0.1, 0.6, 1.0] {
-                let bsdf = Bsdf::Plastic { albedo: Vec3::new(0.7, 0.4, 0.1), eta: 1.5, alpha };
+                let bsdf = Bsdf::Plastic { albedo: Vec3::new(0.7, 0.4, 0.1), eta: 1.5, alpha, dist: Default::default(), nonlinear: true };
                 push(format!("plastic a={alpha}"), bsdf, &[1.0]);
             }
         }
@@ -488,15 +492,15 @@ fn white_bsdfs() -> Vec<(String, Bsdf)> {
     let mut v: Vec<(String, Bsdf)> = vec![("lambert".into(), Bsdf::Lambert { albedo: Vec3::ONE })];
     for alpha in [0.0, 0.002, 0.05, 0.3, 1.0] {
         // Silver-like and a k = 0 "conductor" (a dielectric-like Fresnel) bracket the range.
-        v.push((format!("conductor a={alpha}"), Bsdf::Conductor { eta: Vec3::splat(0.15), k: Vec3::splat(3.6), alpha, specular_tint: Vec3::ONE }));
+        v.push((format!("conductor a={alpha}"), Bsdf::Conductor { eta: Vec3::splat(0.15), k: Vec3::splat(3.6), alpha, specular_tint: Vec3::ONE, dist: Default::default() }));
         v.push((format!("gold a={alpha}"), conductor(alpha)));
         for eta in [1.01, 1.33, 1.5, 2.4] {
-            v.push((format!("dielectric a={alpha} eta={eta}"), Bsdf::Dielectric { eta, alpha, tint: Vec3::ONE }));
+            v.push((format!("dielectric a={alpha} eta={eta}"), Bsdf::Dielectric { eta, alpha, tint: Vec3::ONE, dist: Default::default() }));
         }
     }
     for alpha in [0.0, 0.05, 0.1, 0.3, 0.6, 1.0] {
         for eta in [1.0, 1.2, 1.5, 2.0, 3.0] {
-            v.push((format!("plastic a={alpha} eta={eta}"), Bsdf::Plastic { albedo: Vec3::ONE, eta, alpha }));
+            v.push((format!("plastic a={alpha} eta={eta}"), Bsdf::Plastic { albedo: Vec3::ONE, eta, alpha, dist: Default::default(), nonlinear: true }));
         }
     }
     v
@@ -535,7 +539,7 @@ fn energy_of_known_cases() {
     // Smooth glass, eta 1.5, normal incidence: F = ((η−1)/(η+1))² = 0.04. In radiance units the
     // transmitted weight is (1/1.5)² so the mean is F + (1−F)/η² = 0.46667 from outside and
     // F + (1−F)η² = 2.2 from inside; with the η² factor undone it is 1 on both sides.
-    let glass = Bsdf::Dielectric { eta: 1.5, alpha: 0.0, tint: Vec3::ONE };
+    let glass = Bsdf::Dielectric { eta: 1.5, alpha: 0.0, tint: Vec3::ONE, dist: Default::default() };
     let f = 0.04f64;
     for (wo, expect) in [(Vec3::Z, f + (1.0 - f) / 2.25), (-Vec3::Z, f + (1.0 - f) * 2.25)] {
         let (m, se) = energy(&glass, wo, n, false, 2);
@@ -549,7 +553,7 @@ fn energy_of_known_cases() {
     // coat only the tabulated directional albedo (~1e-3) separates it from 1.
     for alpha in [0.0, 0.3, 1.0] {
         for c in [0.1, 0.5, 1.0] {
-            let plastic = Bsdf::Plastic { albedo: Vec3::ONE, eta: 1.5, alpha };
+            let plastic = Bsdf::Plastic { albedo: Vec3::ONE, eta: 1.5, alpha, dist: Default::default(), nonlinear: true };
             let (m, se) = energy(&plastic, wo_at(c), n, false, 4);
             assert!((m - 1.0).abs() < 4.0 * se + 3e-3, "white plastic a={alpha} cos_o={c}: {m} ± {se}");
         }
@@ -557,7 +561,7 @@ fn energy_of_known_cases() {
 
     // Rough glass keeps almost all energy at moderate roughness: single-scattering GGX loses
     // only what G2 < G1 discards (< 2 % at alpha 0.1 near normal incidence).
-    let rough = Bsdf::Dielectric { eta: 1.5, alpha: 0.1, tint: Vec3::ONE };
+    let rough = Bsdf::Dielectric { eta: 1.5, alpha: 0.1, tint: Vec3::ONE, dist: Default::default() };
     for wo in [wo_at(0.9), wo_at(-0.9)] {
         let (m, se) = energy(&rough, wo, n, true, 5);
         assert!(m > 0.98 - 4.0 * se && m <= 1.0 + 4.0 * se, "rough glass wo={wo}: {m} ± {se}");
@@ -572,13 +576,13 @@ fn hard_cases_stay_finite() {
     let mut bsdfs = vec![Bsdf::Lambert { albedo: Vec3::ZERO }, Bsdf::Lambert { albedo: Vec3::ONE }];
     for alpha in [0.0, 1e-4, MIN_ALPHA, 0.5, 1.0] {
         bsdfs.push(conductor(alpha));
-        bsdfs.push(Bsdf::Conductor { eta: Vec3::ONE, k: Vec3::ZERO, alpha, specular_tint: Vec3::ZERO });
+        bsdfs.push(Bsdf::Conductor { eta: Vec3::ONE, k: Vec3::ZERO, alpha, specular_tint: Vec3::ZERO, dist: Default::default() });
         for eta in [1.0, 1.00005, 1.0002, 1.5, 0.6] {
-            bsdfs.push(Bsdf::Dielectric { eta, alpha, tint: Vec3::ONE });
+            bsdfs.push(Bsdf::Dielectric { eta, alpha, tint: Vec3::ONE, dist: Default::default() });
         }
         for eta in [1.0, 1.5] {
-            bsdfs.push(Bsdf::Plastic { albedo: Vec3::ZERO, eta, alpha });
-            bsdfs.push(Bsdf::Plastic { albedo: Vec3::ONE, eta, alpha });
+            bsdfs.push(Bsdf::Plastic { albedo: Vec3::ZERO, eta, alpha, dist: Default::default(), nonlinear: true });
+            bsdfs.push(Bsdf::Plastic { albedo: Vec3::ONE, eta, alpha, dist: Default::default(), nonlinear: true });
         }
     }
     let wos = [
@@ -632,7 +636,7 @@ fn hard_cases_stay_finite() {
         assert_eq!(bsdf.pdf(wo_at(0.5), wo_at(-0.5)), 0.0);
     }
     // IOR 1 passes straight through with the tint as weight.
-    let clear = Bsdf::Dielectric { eta: 1.0, alpha: 0.4, tint: Vec3::new(0.9, 0.8, 0.7) };
+    let clear = Bsdf::Dielectric { eta: 1.0, alpha: 0.4, tint: Vec3::new(0.9, 0.8, 0.7), dist: Default::default() };
     let s = clear.sample(wo_at(0.3), 0.5, Vec2::splat(0.5)).unwrap();
     assert_eq!(s.wi, -wo_at(0.3));
     assert_eq!(s.weight, Vec3::new(0.9, 0.8, 0.7));
@@ -648,11 +652,11 @@ fn lobe_bitmasks_match_method() {
         (Bsdf::Lambert { albedo: Vec3::ONE }, wo_at(0.5), vec![5]),
         (conductor(0.0), wo_at(0.5), vec![17]),
         (conductor(0.2), wo_at(0.5), vec![9]),
-        (Bsdf::Dielectric { eta: 1.5, alpha: 0.0, tint: Vec3::ONE }, wo_at(0.5), vec![17, 18]),
-        (Bsdf::Dielectric { eta: 1.5, alpha: 0.2, tint: Vec3::ONE }, wo_at(-0.5), vec![9, 10]),
-        (Bsdf::Dielectric { eta: 1.0, alpha: 0.2, tint: Vec3::ONE }, wo_at(0.5), vec![18]),
-        (Bsdf::Plastic { albedo: Vec3::splat(0.5), eta: 1.5, alpha: 0.0 }, wo_at(0.2), vec![5, 17]),
-        (Bsdf::Plastic { albedo: Vec3::splat(0.5), eta: 1.5, alpha: 0.2 }, wo_at(0.2), vec![5, 9]),
+        (Bsdf::Dielectric { eta: 1.5, alpha: 0.0, tint: Vec3::ONE, dist: Default::default() }, wo_at(0.5), vec![17, 18]),
+        (Bsdf::Dielectric { eta: 1.5, alpha: 0.2, tint: Vec3::ONE, dist: Default::default() }, wo_at(-0.5), vec![9, 10]),
+        (Bsdf::Dielectric { eta: 1.0, alpha: 0.2, tint: Vec3::ONE, dist: Default::default() }, wo_at(0.5), vec![18]),
+        (Bsdf::Plastic { albedo: Vec3::splat(0.5), eta: 1.5, alpha: 0.0, dist: Default::default(), nonlinear: true }, wo_at(0.2), vec![5, 17]),
+        (Bsdf::Plastic { albedo: Vec3::splat(0.5), eta: 1.5, alpha: 0.2, dist: Default::default(), nonlinear: true }, wo_at(0.2), vec![5, 9]),
     ];
     let mut rng = Pcg32::new(1, 2);
     for (bsdf, wo, expect) in cases {
@@ -696,3 +700,4 @@ fn fresnel_reference_values() {
     assert!((f0 - expect).abs().max_element() < 1e-5, "{f0} vs {expect}");
     assert!((conductor(0.3).albedo() - expect).abs().max_element() < 1e-5);
 }
+

@@ -62,6 +62,7 @@ impl Builder {
             kind: MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::splat(0.5)) },
             emission: Vec3::ZERO,
             two_sided_emission: false,
+            one_sided: false,
         });
         self.default_material = Some(i);
         i

@@ -200,11 +200,11 @@ impl Ctx {
         };
         let mean_base = base * base_tex.map_or(Vec3::ONE, |t| b.textures[t as usize].mean());
         let kind = if metallic >= 0.5 {
-            MaterialKind::Conductor { eta: Vec3::ONE, k: Vec3::splat(20.0), roughness: alpha, specular_tint: ColorParam::Const(mean_base) }
+            MaterialKind::Conductor { eta: Vec3::ONE, k: Vec3::splat(20.0), roughness: alpha, specular_tint: ColorParam::Const(mean_base), dist: Default::default() }
         } else if transmission >= 0.5 {
-            MaterialKind::Dielectric { ior, roughness: alpha, tint: mean_base }
+            MaterialKind::Dielectric { ior, roughness: alpha, tint: mean_base, dist: Default::default() }
         } else if roughness < 0.9 {
-            MaterialKind::Plastic { albedo, ior, roughness: alpha }
+            MaterialKind::Plastic { albedo, ior, roughness: alpha, dist: Default::default(), nonlinear: true }
         } else {
             MaterialKind::Lambert { albedo }
         };
@@ -215,7 +215,7 @@ impl Ctx {
         }
         let emission = check(b, "emission (factor × strength)", emission)?;
         let index = m.index().unwrap_or(0);
-        Ok(Material { name: m.name().map_or_else(|| format!("gltf material {index}"), str::to_string), kind, emission, two_sided_emission: m.double_sided() })
+        Ok(Material { name: m.name().map_or_else(|| format!("gltf material {index}"), str::to_string), kind, emission, two_sided_emission: m.double_sided(), one_sided: false })
     }
 
     fn texture(&mut self, b: &mut Builder, t: &gltf::Texture, field: &str) -> Result<u32> {

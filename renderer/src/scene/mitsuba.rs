@@ -6,16 +6,17 @@
 //! element (`scene.xml: line 12 <bsdf type="hair">: unsupported BSDF type`), never a silent
 //! default: a scene that renders differently from what its author made would poison a test.
 //! The few things that are read but approximated (a textured dielectric or plastic specular
-//! reflectance becomes its mean, a one-sided diffuse becomes two-sided) print a warning.
+//! reflectance becomes its mean, anisotropic roughness becomes isotropic) print a warning.
+//! renderer/tests/mitsuba_crosscheck.rs renders scenes in both renderers and compares them.
 //! Texture lookups (`bitmap`, `checkerboard`) follow Mitsuba 3, which agrees with 0.6 on uv ≥ 0.
 
 use super::builder::{check_resolution, warn, Builder};
 use super::obj::MaterialChoice;
 use super::primitives::{self, TriMesh};
-use super::toml_format::CONDUCTOR_PRESETS;
 use super::{obj, ColorParam, Material, MaterialKind, RenderSettings, SceneDescription};
 use crate::camera::{Camera, FovAxis};
 use crate::light::Environment;
+use crate::material::Distribution;
 use crate::texture::srgb_to_linear;
 use crate::{Error, Result};
 use glam::{Affine2, Mat3, Mat4, Vec2, Vec3};
@@ -81,6 +82,8 @@ pub fn load(path: &Path) -> Result<SceneDescription> {
 struct BsdfDef {
     name: String,
     kind: MaterialKind,
+    /// Wrapped in `twosided`: shaded alike from both sides (else black from behind).
+    two_sided: bool,
 }
 
 /// A colour parameter: a constant or a texture node (resolved when the material is built),
@@ -592,20 +595,27 @@ impl<'a, 'i> Loader<'a, 'i> {
     fn bsdf(&mut self, n: Node<'a, 'i>, name: &str) -> Result<BsdfDef> {
         let ty = self.required(n, "type")?;
         if ty == "twosided" {
-            // Our BSDFs shade both sides alike, which is what twosided asks for.
+            // Shaded alike from both sides; a BSDF outside `twosided` is black from behind.
             let inner: Vec<_> = Self::elements(n).collect();
             return match inner.as_slice() {
-                [one] if one.tag_name().name() == "bsdf" => self.bsdf(*one, name),
+                [one] if one.tag_name().name() == "bsdf" => self.bsdf(*one, name).map(|d| BsdfDef { two_sided: true, ..d }),
                 [one] if one.tag_name().name() == "ref" => {
                     let id = self.required(*one, "id")?;
-                    self.bsdfs.get(&id).cloned().ok_or_else(|| self.err(*one, format!("no <bsdf id=\"{id}\"> defined before this")))
+                    let d = self.bsdfs.get(&id).cloned().ok_or_else(|| self.err(*one, format!("no <bsdf id=\"{id}\"> defined before this")))?;
+                    Ok(BsdfDef { two_sided: true, ..d })
                 }
                 _ => Err(self.err(n, "twosided needs exactly one nested <bsdf> (two different sides are not supported)")),
             };
         }
         let mut alpha: Option<f32> = None;
         let (mut alpha_u, mut alpha_v) = (None, None);
-        let (mut int_ior, mut ext_ior) = (1.5046f32, 1.000277f32);
+        // Mitsuba's default microfacet distribution is Beckmann (0.6 and 3 alike).
+        let mut dist = Distribution::Beckmann;
+        let mut nonlinear = false;
+        // Mitsuba's defaults: BK7 glass inside a dielectric, polypropylene (1.49) under a plastic
+        // coat, air outside.
+        let default_int = if ty.ends_with("plastic") { 1.49 } else { 1.5046f32 };
+        let (mut int_ior, mut ext_ior) = (default_int, 1.000277f32);
         let mut reflectance: Option<Spectrum> = None;
         let mut specular: Option<Spectrum> = None;
         let mut transmittance: Option<Spectrum> = None;
@@ -618,11 +628,13 @@ impl<'a, 'i> Loader<'a, 'i> {
                 (_, "alphaV" | "alpha_v") => alpha_v = Some(self.float(c)?.max(0.0)),
                 (_, "distribution") => {
                     let d = self.required(c, "value")?;
-                    // Beckmann and GGX lobes of the same alpha have nearly the same width; ours is
-                    // GGX. Phong's exponent has no alpha at all.
-                    if !matches!(d.as_str(), "ggx" | "beckmann" | "as") {
-                        return Err(self.err(c, format!("microfacet distribution \"{d}\" is not supported (ggx, beckmann)")));
-                    }
+                    // Phong's exponent has no alpha at all; "as" (Ashikhmin–Shirley) is 0.5's
+                    // anisotropic Phong.
+                    dist = match d.as_str() {
+                        "ggx" => Distribution::Ggx,
+                        "beckmann" => Distribution::Beckmann,
+                        _ => return Err(self.err(c, format!("microfacet distribution \"{d}\" is not supported (ggx, beckmann)"))),
+                    };
                 }
                 ("diffuse" | "roughdiffuse", "reflectance") | ("plastic" | "roughplastic", "diffuseReflectance" | "diffuse_reflectance") => {
                     reflectance = Some(self.spectrum(c)?)
@@ -635,8 +647,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                 ("conductor" | "roughconductor", "k") => k = Some(self.color(c)?),
                 ("conductor" | "roughconductor", "material") => preset = Some(self.required(c, "value")?),
                 ("conductor" | "roughconductor", "extEta" | "ext_eta") => ext_eta = self.ior(c)?,
-                // Mitsuba's plastic option for a wet look changes the diffuse colour only slightly.
-                ("plastic" | "roughplastic", "nonlinear") => {}
+                ("plastic" | "roughplastic", "nonlinear") => nonlinear = self.boolean(c)?,
                 _ => return Err(self.err(c, format!("unsupported parameter of a \"{ty}\" BSDF"))),
             }
         }
@@ -682,7 +693,7 @@ impl<'a, 'i> Loader<'a, 'i> {
                 if (s - Vec3::ONE).abs().max_element() > 1e-3 {
                     self.warn(n, format!("plastic specularReflectance {s} is ignored (the coat reflects by Fresnel alone)"));
                 }
-                MaterialKind::Plastic { albedo, ior: int_ior / ext_ior, roughness }
+                MaterialKind::Plastic { albedo, ior: int_ior / ext_ior, roughness, dist, nonlinear }
             }
             "dielectric" | "roughdielectric" => {
                 let r = specular_mean(self, specular, "specular reflectance")?;
@@ -690,32 +701,35 @@ impl<'a, 'i> Loader<'a, 'i> {
                 if (r - t).abs().max_element() > 1e-3 {
                     self.warn(n, format!("reflectance {r} and transmittance {t} differ; both become {t}"));
                 }
-                MaterialKind::Dielectric { ior: int_ior / ext_ior, roughness, tint: t }
+                MaterialKind::Dielectric { ior: int_ior / ext_ior, roughness, tint: t, dist }
             }
             "conductor" | "roughconductor" => {
                 let (e, kk) = match (&preset, eta, k) {
-                    (Some(p), None, None) if p == "none" => (Vec3::ONE, Vec3::splat(20.0)),
+                    // A perfect mirror (Mitsuba: η = 0, k = 1); k = 10⁴ gives F = 1 − 4·10⁻⁸.
+                    (Some(p), None, None) if p == "none" => NONE_CONDUCTOR,
                     (Some(p), None, None) => {
-                        let (_, e, kk) = CONDUCTOR_PRESETS.iter().find(|(m, _, _)| m.eq_ignore_ascii_case(p)).ok_or_else(|| {
-                            let known: Vec<_> = CONDUCTOR_PRESETS.iter().map(|(m, _, _)| *m).collect();
+                        let (_, e, kk) = MITSUBA3_CONDUCTORS.iter().find(|(m, _, _)| m.eq_ignore_ascii_case(p)).ok_or_else(|| {
+                            let known: Vec<_> = MITSUBA3_CONDUCTORS.iter().map(|(m, _, _)| *m).collect();
                             self.err(n, format!("unknown conductor material \"{p}\" (known: {}, none; or give eta and k)", known.join(", ")))
                         })?;
                         (Vec3::from(*e), Vec3::from(*kk))
                     }
                     (None, Some(e), Some(kk)) => (e, kk),
                     // Mitsuba's default conductor is copper.
-                    (None, None, None) => (Vec3::from(CONDUCTOR_PRESETS[4].1), Vec3::from(CONDUCTOR_PRESETS[4].2)),
+                    // Mitsuba 3's default conductor is that mirror (Mitsuba 0.6's was copper; Mitsuba 3
+                    // renders 0.6 files with its own default too).
+                    (None, None, None) => NONE_CONDUCTOR,
                     _ => return Err(self.err(n, "give either `material` or both `eta` and `k`")),
                 };
                 if e.min_element() <= 0.0 {
                     return Err(self.err(n, format!("eta {e} must be positive")));
                 }
                 let specular_tint = self.color_param(specular.unwrap_or(Spectrum::Const(Vec3::ONE)))?;
-                MaterialKind::Conductor { eta: e / ext_eta, k: kk / ext_eta, roughness, specular_tint }
+                MaterialKind::Conductor { eta: e / ext_eta, k: kk / ext_eta, roughness, specular_tint, dist }
             }
             other => return Err(self.err(n, format!("unsupported BSDF type \"{other}\""))),
         };
-        Ok(BsdfDef { name: name.to_string(), kind })
+        Ok(BsdfDef { name: name.to_string(), kind, two_sided: false })
     }
 
     fn shape(&mut self, n: Node<'a, 'i>) -> Result<()> {
@@ -779,7 +793,9 @@ impl<'a, 'i> Loader<'a, 'i> {
         if det == 0.0 || !det.is_finite() {
             return Err(self.err(n, "the shape's toWorld transform is singular"));
         }
-        let def = bsdf.unwrap_or_else(|| BsdfDef { name: "default".into(), kind: MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::splat(0.5)) } });
+        // Mitsuba's default BSDF is a grey diffuse, but black on an emitter (Mitsuba 3's Shape).
+        let default_albedo = if emission.is_some() { 0.0 } else { 0.5 };
+        let def = bsdf.unwrap_or_else(|| BsdfDef { name: "default".into(), kind: MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::splat(default_albedo)) }, two_sided: false });
         let emission = emission.unwrap_or(Vec3::ZERO);
         let obj_path = match (ty.as_str(), filename) {
             ("obj", Some(file)) => Some(self.dir.join(file)),
@@ -843,12 +859,13 @@ impl<'a, 'i> Loader<'a, 'i> {
     /// BSDF without emission.
     fn material_for(&mut self, def: &BsdfDef, emission: Vec3) -> u32 {
         let name = if emission.max_element() > 0.0 { format!("{} (emitter {})", def.name, self.b.materials.len()) } else { def.name.clone() };
+        let one_sided = !def.two_sided;
         if emission.max_element() <= 0.0 {
-            if let Some(i) = self.b.materials.iter().position(|m| m.name == name && !m.is_emissive()) {
+            if let Some(i) = self.b.materials.iter().position(|m| m.name == name && !m.is_emissive() && m.one_sided == one_sided) {
                 return i as u32;
             }
         }
-        self.b.add_material(Material { name, kind: def.kind.clone(), emission, two_sided_emission: false })
+        self.b.add_material(Material { name, kind: def.kind.clone(), emission, two_sided_emission: false, one_sided })
     }
 
     fn environment(&self, n: Node<'a, 'i>) -> Result<Environment> {
@@ -867,6 +884,22 @@ impl<'a, 'i> Loader<'a, 'i> {
         Ok(Environment::Constant(radiance))
     }
 }
+
+/// Mitsuba's `material="none"`: a perfect mirror.
+const NONE_CONDUCTOR: (Vec3, Vec3) = (Vec3::ONE, Vec3::splat(1e4));
+
+/// RGB complex IOR (η, k) of Mitsuba's named conductors as Mitsuba 3.9's `scalar_rgb` variant
+/// uses them (read back from it with `mi.traverse`): within ~1e-3 of our TOML presets
+/// (`CONDUCTOR_PRESETS`, integrated from the same spectra), but a Mitsuba scene should render
+/// as Mitsuba renders it. The other metals of Mitsuba's list are not tabulated (an error).
+#[allow(clippy::excessive_precision)]
+const MITSUBA3_CONDUCTORS: &[(&str, [f32; 3], [f32; 3])] = &[
+    ("Ag", [0.155276, 0.116728, 0.138388], [4.82835, 3.12222, 2.1469]),
+    ("Al", [1.6575, 0.880405, 0.521244], [9.22381, 6.2695, 4.837]),
+    ("Au", [0.143036, 0.375307, 1.44205], [3.983, 2.38556, 1.60336]),
+    ("Cr", [4.36967, 2.91651, 1.6549], [5.20655, 4.23131, 3.7547]),
+    ("Cu", [0.201005, 0.92375, 1.10222], [3.91326, 2.45305, 2.14209]),
+];
 
 /// Whether any colour of a material varies over the surface.
 fn kind_is_textured(kind: &MaterialKind) -> bool {

@@ -466,13 +466,13 @@ fn material(check: &Check, b: &mut Builder, dir: &Path, name: &str, d: &Material
     };
     let kind = match d.kind {
         Diffuse => MaterialKind::Lambert { albedo: albedo()? },
-        Plastic => MaterialKind::Plastic { albedo: albedo()?, ior, roughness },
+        Plastic => MaterialKind::Plastic { albedo: albedo()?, ior, roughness, dist: Default::default(), nonlinear: true },
         Dielectric => {
             let tint = match d.tint {
                 Some(t) => check.unit3(&f("tint"), t)?,
                 None => Vec3::ONE,
             };
-            MaterialKind::Dielectric { ior, roughness, tint }
+            MaterialKind::Dielectric { ior, roughness, tint, dist: Default::default() }
         }
         Conductor => {
             let (eta, k) = match (&d.preset, d.eta, d.k) {
@@ -499,7 +499,7 @@ fn material(check: &Check, b: &mut Builder, dir: &Path, name: &str, d: &Material
                 Some(t) => check.unit3(&f("specular_tint"), t)?,
                 None => Vec3::ONE,
             };
-            MaterialKind::Conductor { eta, k, roughness, specular_tint: ColorParam::Const(specular_tint) }
+            MaterialKind::Conductor { eta, k, roughness, specular_tint: ColorParam::Const(specular_tint), dist: Default::default() }
         }
     };
     let emission = match d.emission {
@@ -517,7 +517,7 @@ fn material(check: &Check, b: &mut Builder, dir: &Path, name: &str, d: &Material
     if !emission.is_finite() {
         return Err(check.err(&f("strength"), "emission × strength overflows"));
     }
-    Ok(Material { name: name.to_string(), kind, emission, two_sided_emission: d.two_sided_emission.unwrap_or(false) })
+    Ok(Material { name: name.to_string(), kind, emission, two_sided_emission: d.two_sided_emission.unwrap_or(false), one_sided: false })
 }
 
 /// Rejects a procedural key on a shape type that does not read it (a typo must not pass silently).

@@ -1,0 +1,537 @@
+//! Our images against Mitsuba 3's, scene by scene, at equal settings: the same scene file (or,
+//! for the TOML Cornell box, the scene as we loaded it, exported to Mitsuba XML), camera, image
+//! size, path depth, a box filter (every sample lands in its own pixel), independent random
+//! samples and no Russian roulette on either side. Three statistical tests per scene, each at a
+//! family-wise significance of `ALPHA` (Šidák-corrected for the number of tests in the family),
+//! all Welch t-tests on the difference of the two means with the variance of each mean
+//! estimated from its own render:
+//! - the image mean per channel (3 tests);
+//! - 8×8-pixel blocks per channel (catches a bias of a few percent over a region);
+//! - every pixel per channel, as Mitsuba's own test suite does it (catches a wrong texture, a
+//!   missing highlight, a shifted or mirrored image).
+//!
+//! Our variance of each pixel mean comes from the samples (the frame's variance buffer);
+//! Mitsuba's from `SEEDS` independent renders (tools/mitsuba/render.py explains why not its
+//! `moment` integrator), so its estimate has SEEDS − 1 degrees of freedom and each test uses
+//! Welch–Satterthwaite's degrees of freedom. docs/mitsuba-crosscheck.md has the results.
+//!
+//! Needs python3 with venv support and network access to PyPI the first time: Mitsuba 3
+//! (`mitsuba`, scalar_rgb variant, and numpy) is installed into `target/mitsuba-venv` and
+//! reused. Without it the test fails (as the Embree cross-check does; it is required in CI).
+//! Pictures (ours | Mitsuba | z) and the numbers go to target/mitsuba-crosscheck/.
+
+use glam::Vec3;
+use tools_venv::tools_venv;
+use renderer::film::BufferRequest;
+use renderer::integrator::{self, RenderOptions};
+use renderer::scene::{ColorParam, MaterialKind, Scene};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Family-wise significance of each of the three tests of a scene. The renders are
+/// deterministic (fixed seeds on both sides), so a pass or a failure is reproducible; ALPHA says
+/// how unlikely a failure would be if both renderers computed the same image.
+const ALPHA: f64 = 1e-3;
+/// Mitsuba renders each scene this many times with different seeds.
+const SEEDS: u32 = 16;
+const MITSUBA: &str = "mitsuba==3.9.1";
+
+fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("renderer/ has a parent").to_path_buf()
+}
+
+/// Per-pixel, per-channel means and variances of the means (RGB, row-major from the top left).
+struct Image {
+    width: u32,
+    height: u32,
+    mean: Vec<f64>,
+    var: Vec<f64>,
+    /// Degrees of freedom of each variance estimate.
+    dof: f64,
+    seconds: f64,
+}
+
+struct Case {
+    name: &'static str,
+    /// The file we load.
+    ours: PathBuf,
+    /// Mitsuba XML; `None`: export the scene as we loaded it.
+    mitsuba: Option<PathBuf>,
+    width: u32,
+    height: u32,
+    /// Our samples per pixel; Mitsuba renders SEEDS × spp / SEEDS.
+    spp: u32,
+    /// Mitsuba's max_depth (path segments); our max_bounces is one less.
+    max_depth: u32,
+}
+
+fn render_ours(case: &Case) -> Image {
+    let mut scene = Scene::load(&case.ours).unwrap_or_else(|e| panic!("{}: {e}", case.name));
+    // A new size keeps the field of view along the scene's fov axis, as Mitsuba's film does.
+    scene.camera.width = case.width;
+    scene.camera.height = case.height;
+    let opts = RenderOptions { spp: case.spp, seed: 1, max_bounces: case.max_depth - 1, russian_roulette: false, request: BufferRequest::default(), crop: None, first_sample: 0 };
+    let (frame, stats) = integrator::render(&scene, &opts, &|_| {}).unwrap_or_else(|e| panic!("{}: {e}", case.name));
+    assert_eq!(frame.nonfinite_samples, 0, "{}: non-finite samples", case.name);
+    Image {
+        width: frame.width,
+        height: frame.height,
+        mean: frame.radiance.mean.iter().map(|&v| v as f64).collect(),
+        var: frame.radiance.var.iter().map(|&v| v as f64).collect(),
+        dof: (case.spp - 1) as f64,
+        seconds: stats.wall.as_secs_f64(),
+    }
+}
+
+fn render_mitsuba(python: &Path, xml: &Path, case: &Case, out_dir: &Path) -> Image {
+    let out = out_dir.join(format!("{}-mitsuba.bin", case.name));
+    let exr = out_dir.join(format!("{}-mitsuba.exr", case.name));
+    let script = workspace().join("tools/mitsuba/render.py");
+    let spp = case.spp / SEEDS;
+    let args = [case.width, case.height, spp, SEEDS, case.max_depth].map(|v| v.to_string());
+    let o = Command::new(python).arg(&script).arg(xml).arg(&out).args(&args).arg(&exr).output().unwrap_or_else(|e| panic!("{}: {e}", script.display()));
+    assert!(o.status.success(), "{}: Mitsuba failed on {}:\n{}", case.name, xml.display(), String::from_utf8_lossy(&o.stderr));
+    let data = std::fs::read(&out).unwrap();
+    assert_eq!(&data[..8], b"PGMI0001");
+    let u = |o: usize| u32::from_le_bytes(data[o..o + 4].try_into().unwrap());
+    let (w, h) = (u(8), u(12));
+    assert_eq!((w, h, u(16), u(20)), (case.width, case.height, SEEDS, spp));
+    let seconds = f64::from_le_bytes(data[24..32].try_into().unwrap());
+    let n = (w * h * 3) as usize;
+    assert_eq!(data.len(), 32 + 8 * n);
+    let f = |i: usize| f32::from_le_bytes(data[32 + 4 * i..36 + 4 * i].try_into().unwrap()) as f64;
+    Image { width: w, height: h, mean: (0..n).map(f).collect(), var: (0..n).map(|i| f(n + i)).collect(), dof: (SEEDS - 1) as f64, seconds }
+}
+
+/// Writes an image in render.py's format (for looking at the differences afterwards).
+fn write_image(img: &Image, path: &Path, spp: u32, seeds: u32) {
+    let mut b = b"PGMI0001".to_vec();
+    for v in [img.width, img.height, seeds, spp] {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    b.extend_from_slice(&img.seconds.to_le_bytes());
+    for v in img.mean.iter().chain(&img.var) {
+        b.extend_from_slice(&(*v as f32).to_le_bytes());
+    }
+    std::fs::write(path, b).unwrap();
+}
+
+/// Writes the scene as we loaded it as Mitsuba XML with one OBJ per material: the TOML Cornell
+/// box has no Mitsuba file of its own. Only what such scenes use: constant colours, area lights.
+fn export_mitsuba(scene: &Scene, dir: &Path) -> PathBuf {
+    std::fs::create_dir_all(dir).unwrap();
+    assert!(scene.lights.env_radiance(Vec3::Y) == Vec3::ZERO, "export: environments are not exported");
+    let c = &scene.camera;
+    let left = -c.right;
+    let m = [[left.x, c.up.x, c.forward.x, c.position.x], [left.y, c.up.y, c.forward.y, c.position.y], [left.z, c.up.z, c.forward.z, c.position.z]];
+    let axis = match c.fov_axis {
+        renderer::camera::FovAxis::X => "x",
+        renderer::camera::FovAxis::Y => "y",
+        renderer::camera::FovAxis::Diagonal => "diagonal",
+        renderer::camera::FovAxis::Smaller => "smaller",
+        renderer::camera::FovAxis::Larger => "larger",
+    };
+    let mut xml = String::from("<scene version=\"3.0.0\">\n");
+    let mat: Vec<String> = m.iter().flatten().map(|v| v.to_string()).chain(["0", "0", "0", "1"].map(String::from)).collect();
+    writeln!(
+        xml,
+        "  <sensor type=\"perspective\"><float name=\"fov\" value=\"{}\"/><string name=\"fov_axis\" value=\"{axis}\"/>\n    <transform name=\"to_world\"><matrix value=\"{}\"/></transform>\n    <film type=\"hdrfilm\"><integer name=\"width\" value=\"{}\"/><integer name=\"height\" value=\"{}\"/></film></sensor>",
+        2.0 * c.tan_half_fov.atan().to_degrees(),
+        mat.join(" "),
+        c.width,
+        c.height
+    )
+    .unwrap();
+    let rgb = |v: Vec3| format!("{}, {}, {}", v.x, v.y, v.z);
+    let mesh = &scene.mesh;
+    for (mi, material) in scene.materials.iter().enumerate() {
+        let tris: Vec<usize> = (0..mesh.triangles.len()).filter(|&t| mesh.material[t] as usize == mi).collect();
+        if tris.is_empty() {
+            continue;
+        }
+        let mut obj = String::new();
+        // Shading normals only on non-emitters: an emitter's front is its winding on both sides.
+        let normals = !mesh.normals.is_empty() && !material.is_emissive();
+        for &t in &tris {
+            for &v in &mesh.triangles[t] {
+                let p = mesh.positions[v as usize];
+                writeln!(obj, "v {} {} {}", p.x, p.y, p.z).unwrap();
+                if normals {
+                    let n = mesh.normals[v as usize];
+                    writeln!(obj, "vn {} {} {}", n.x, n.y, n.z).unwrap();
+                }
+            }
+        }
+        for k in 0..tris.len() {
+            let (a, b, c) = (3 * k + 1, 3 * k + 2, 3 * k + 3);
+            if normals {
+                writeln!(obj, "f {a}//{a} {b}//{b} {c}//{c}").unwrap();
+            } else {
+                writeln!(obj, "f {a} {b} {c}").unwrap();
+            }
+        }
+        let file = format!("material{mi}.obj");
+        std::fs::write(dir.join(&file), obj).unwrap();
+        let bsdf = match &material.kind {
+            MaterialKind::Lambert { albedo: ColorParam::Const(a) } => format!("<bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"{}\"/></bsdf>", rgb(*a)),
+            other => panic!("export: material {} ({other:?}) is not exported", material.name),
+        };
+        let emitter = if material.is_emissive() {
+            assert!(!material.two_sided_emission, "export: two-sided emission");
+            format!("<emitter type=\"area\"><rgb name=\"radiance\" value=\"{}\"/></emitter>", rgb(material.emission))
+        } else {
+            String::new()
+        };
+        writeln!(xml, "  <shape type=\"obj\"><string name=\"filename\" value=\"{file}\"/><bsdf type=\"twosided\">{bsdf}</bsdf>{emitter}</shape>").unwrap();
+    }
+    xml.push_str("</scene>\n");
+    let path = dir.join("scene.xml");
+    std::fs::write(&path, xml).unwrap();
+    path
+}
+
+// ---- Statistics -------------------------------------------------------------------------
+
+/// ln Γ(x), x > 0 (Lanczos, g = 7, 9 terms; |error| < 1e-13 here).
+fn ln_gamma(x: f64) -> f64 {
+    const C: [f64; 9] = [
+        0.999_999_999_999_809_9,
+        676.520_368_121_885_1,
+        -1_259.139_216_722_402_8,
+        771.323_428_777_653_1,
+        -176.615_029_162_140_6,
+        12.507_343_278_686_905,
+        -0.138_571_095_265_720_12,
+        9.984_369_578_019_572e-6,
+        1.505_632_735_149_311_6e-7,
+    ];
+    if x < 0.5 {
+        return (std::f64::consts::PI / (std::f64::consts::PI * x).sin()).ln() - ln_gamma(1.0 - x);
+    }
+    let x = x - 1.0;
+    let t = x + 7.5;
+    let s: f64 = C[0] + (1..9).map(|i| C[i] / (x + i as f64)).sum::<f64>();
+    0.5 * (2.0 * std::f64::consts::PI).ln() + (x + 0.5) * t.ln() - t + s.ln()
+}
+
+/// Regularised incomplete beta I_x(a, b) (continued fraction, Numerical Recipes' betacf).
+fn inc_beta(a: f64, b: f64, x: f64) -> f64 {
+    if x <= 0.0 {
+        return 0.0;
+    }
+    if x >= 1.0 {
+        return 1.0;
+    }
+    let front = (ln_gamma(a + b) - ln_gamma(a) - ln_gamma(b) + a * x.ln() + b * (1.0 - x).ln()).exp();
+    let cf = |a: f64, b: f64, x: f64| {
+        let tiny = 1e-300;
+        let (qab, qap, qam) = (a + b, a + 1.0, a - 1.0);
+        let mut c = 1.0;
+        let mut d = 1.0 - qab * x / qap;
+        d = if d.abs() < tiny { tiny } else { d };
+        d = 1.0 / d;
+        let mut h = d;
+        for m in 1..500 {
+            let m = m as f64;
+            let m2 = 2.0 * m;
+            let aa = m * (b - m) * x / ((qam + m2) * (a + m2));
+            d = 1.0 + aa * d;
+            d = if d.abs() < tiny { tiny } else { d };
+            c = 1.0 + aa / c;
+            c = if c.abs() < tiny { tiny } else { c };
+            d = 1.0 / d;
+            h *= d * c;
+            let aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
+            d = 1.0 + aa * d;
+            d = if d.abs() < tiny { tiny } else { d };
+            c = 1.0 + aa / c;
+            c = if c.abs() < tiny { tiny } else { c };
+            d = 1.0 / d;
+            let del = d * c;
+            h *= del;
+            if (del - 1.0).abs() < 1e-15 {
+                break;
+            }
+        }
+        h
+    };
+    if x < (a + 1.0) / (a + b + 2.0) {
+        front * cf(a, b, x) / a
+    } else {
+        1.0 - front * cf(b, a, 1.0 - x) / b
+    }
+}
+
+/// Two-sided p-value of Student's t with `dof` degrees of freedom: P(|T| ≥ |t|).
+fn t_two_sided_p(t: f64, dof: f64) -> f64 {
+    if !t.is_finite() {
+        return 0.0;
+    }
+    inc_beta(dof / 2.0, 0.5, dof / (dof + t * t))
+}
+
+/// The smallest |t| (for `dof`) whose two-sided p-value is below `p`, by bisection.
+fn t_threshold(p: f64, dof: f64) -> f64 {
+    let (mut lo, mut hi) = (0.0f64, 1e3f64);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if t_two_sided_p(mid, dof) > p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    hi
+}
+
+/// Šidák's per-test significance for a family of `n` tests at family-wise `alpha`.
+fn sidak(alpha: f64, n: usize) -> f64 {
+    // 1 − (1 − α)^(1/n) without cancellation.
+    -((-alpha).ln_1p() / n as f64).exp_m1()
+}
+
+/// One Welch test: the two means of a cell (a pixel, a block, the image) and their variances.
+#[derive(Clone, Copy, Debug)]
+struct Welch {
+    diff: f64,
+    t: f64,
+    dof: f64,
+    p: f64,
+    ours: f64,
+    theirs: f64,
+}
+
+/// Welch's test on aggregated cells: `cells` lists for each cell the indices (into the images'
+/// per-pixel-channel arrays) it averages.
+fn welch(a: &Image, b: &Image, idx: &[usize]) -> Welch {
+    let k = idx.len() as f64;
+    let (mut ma, mut mb, mut va, mut vb) = (0.0, 0.0, 0.0, 0.0);
+    for &i in idx {
+        ma += a.mean[i];
+        mb += b.mean[i];
+        va += a.var[i];
+        vb += b.var[i];
+    }
+    let (ma, mb, va, vb) = (ma / k, mb / k, va / (k * k), vb / (k * k));
+    // A floor for cells with no variance at all on either side (a constant background seen
+    // directly): rounding-level differences (f32, 1e-5 relative) are not disagreements.
+    let floor = (1e-5 * ma.abs().max(mb.abs())).powi(2) + 1e-20;
+    let v = va + vb + floor;
+    // Welch–Satterthwaite, with each side's per-pixel degrees of freedom (sums of independent
+    // per-pixel variance estimates have at least as many).
+    let dof = (v * v / (va * va / a.dof + vb * vb / b.dof + floor * floor / 1e6)).max(a.dof.min(b.dof));
+    let t = (ma - mb) / v.sqrt();
+    Welch { diff: ma - mb, t, dof, p: t_two_sided_p(t, dof), ours: ma, theirs: mb }
+}
+
+struct Family {
+    worst: Welch,
+    /// The worst cell's position (pixel or block x, y, channel); channel only for the means.
+    at: (u32, u32, usize),
+    tests: usize,
+    threshold_p: f64,
+    failing: usize,
+    /// |t| of every test, for the picture (pixel family) and the quantiles.
+    t: Vec<f64>,
+}
+
+fn family(a: &Image, b: &Image, block: u32) -> Family {
+    let (w, h) = (a.width, a.height);
+    let (bw, bh) = (w.div_ceil(block), h.div_ceil(block));
+    let tests = (bw * bh * 3) as usize;
+    let threshold_p = sidak(ALPHA, tests);
+    let mut worst: Option<(Welch, (u32, u32, usize))> = None;
+    let mut failing = 0;
+    let mut ts = Vec::with_capacity(tests);
+    for by in 0..bh {
+        for bx in 0..bw {
+            for c in 0..3 {
+                let mut idx = Vec::new();
+                for y in by * block..((by + 1) * block).min(h) {
+                    for x in bx * block..((bx + 1) * block).min(w) {
+                        idx.push(((y * w + x) * 3) as usize + c);
+                    }
+                }
+                let r = welch(a, b, &idx);
+                failing += (r.p < threshold_p) as usize;
+                ts.push(r.t.abs());
+                if worst.as_ref().is_none_or(|(wr, _)| r.p < wr.p) {
+                    worst = Some((r, (bx, by, c)));
+                }
+            }
+        }
+    }
+    let (worst, at) = worst.expect("non-empty image");
+    Family { worst, at, tests, threshold_p, failing, t: ts }
+}
+
+fn check_case(python: &Path, case: &Case, out_dir: &Path) -> (String, Vec<String>) {
+    let xml = match &case.mitsuba {
+        Some(p) => p.clone(),
+        None => {
+            let scene = Scene::load(&case.ours).unwrap();
+            let mut scene = scene;
+            scene.camera.width = case.width;
+            scene.camera.height = case.height;
+            export_mitsuba(&scene, &out_dir.join(case.name))
+        }
+    };
+    let ours = render_ours(case);
+    write_image(&ours, &out_dir.join(format!("{}-ours.bin", case.name)), case.spp, 1);
+    let theirs = render_mitsuba(python, &xml, case, out_dir);
+    assert_eq!((ours.width, ours.height), (theirs.width, theirs.height));
+    let (w, h) = (ours.width, ours.height);
+
+    // Pictures: ours | Mitsuba | per-pixel max |t| over the channels (white = the pixel test's
+    // threshold or more).
+    let pixels = family(&ours, &theirs, 1);
+    let t_px = t_threshold(pixels.threshold_p, (SEEDS - 1) as f64);
+    let mut strip = vec![0u8; (3 * w * h * 3) as usize];
+    let a = renderer::film::png::tonemap_rgb8(&ours.mean.iter().map(|&v| v as f32).collect::<Vec<_>>(), 0.0);
+    let b = renderer::film::png::tonemap_rgb8(&theirs.mean.iter().map(|&v| v as f32).collect::<Vec<_>>(), 0.0);
+    for y in 0..h as usize {
+        for x in 0..w as usize {
+            let i = y * w as usize + x;
+            let o = (y * 3 * w as usize + x) * 3;
+            strip[o..o + 3].copy_from_slice(&a[i * 3..i * 3 + 3]);
+            strip[o + 3 * w as usize..o + 3 * w as usize + 3].copy_from_slice(&b[i * 3..i * 3 + 3]);
+            let t = (0..3).map(|c| pixels.t[i * 3 + c]).fold(0.0, f64::max);
+            let g = ((t / t_px).min(1.0) * 255.0) as u8;
+            strip[o + 6 * w as usize..o + 6 * w as usize + 3].copy_from_slice(&[g, g, g]);
+        }
+    }
+    renderer::film::png::write_rgb8(&out_dir.join(format!("{}.png", case.name)), 3 * w, h, strip).unwrap();
+
+    let mut failures = Vec::new();
+    let mut report = format!(
+        "{:<14} {w}x{h}, {} spp (ours) vs {}x{} spp (Mitsuba), max_depth {}; render {:.1} s ours, {:.1} s Mitsuba\n",
+        case.name,
+        case.spp,
+        SEEDS,
+        case.spp / SEEDS,
+        case.max_depth,
+        ours.seconds,
+        theirs.seconds
+    );
+    // Image means, one test per channel.
+    let all: Vec<Welch> = (0..3).map(|c| welch(&ours, &theirs, &(0..(w * h) as usize).map(|i| 3 * i + c).collect::<Vec<_>>())).collect();
+    let p_mean = sidak(ALPHA, 3);
+    for (c, r) in all.iter().enumerate() {
+        let se = (r.diff / r.t).abs();
+        writeln!(
+            report,
+            "  mean {}: ours {:.5}, Mitsuba {:.5}, diff {:+.3}% (±{:.3}% s.e.), t {:+.2} (bound ±{:.2})",
+            ["R", "G", "B"][c],
+            r.ours,
+            r.theirs,
+            100.0 * r.diff / r.theirs,
+            100.0 * se / r.theirs,
+            r.t,
+            t_threshold(p_mean, r.dof)
+        )
+        .unwrap();
+        if r.p < p_mean {
+            failures.push(format!("{}: image mean of channel {c} differs: ours {:.5}, Mitsuba {:.5}, t = {:.2}", case.name, r.ours, r.theirs, r.t));
+        }
+    }
+    for (label, block, f) in [("8x8 blocks", 8u32, family(&ours, &theirs, 8)), ("pixels", 1, pixels)] {
+        let mut sorted = f.t.clone();
+        sorted.sort_by(f64::total_cmp);
+        let q = |p: f64| sorted[((sorted.len() - 1) as f64 * p) as usize];
+        writeln!(
+            report,
+            "  {label:<10}: {} tests, {} fail (p < {:.2e}, |t| ≳ {:.2}); |t| median {:.2}, 99% {:.2}, max {:.2} at ({}, {}) {}: ours {:.4}, Mitsuba {:.4}",
+            f.tests,
+            f.failing,
+            f.threshold_p,
+            t_threshold(f.threshold_p, f.worst.dof),
+            q(0.5),
+            q(0.99),
+            f.worst.t.abs(),
+            f.at.0 * block,
+            f.at.1 * block,
+            ["R", "G", "B"][f.at.2],
+            f.worst.ours,
+            f.worst.theirs
+        )
+        .unwrap();
+        if f.failing > 0 {
+            failures.push(format!(
+                "{}: {} of {} {label} differ (worst at ({}, {}) channel {}: ours {:.4}, Mitsuba {:.4}, t = {:.2}, p = {:.2e})",
+                case.name,
+                f.failing,
+                f.tests,
+                f.at.0 * block,
+                f.at.1 * block,
+                f.at.2,
+                f.worst.ours,
+                f.worst.theirs,
+                f.worst.t,
+                f.worst.p
+            ));
+        }
+    }
+    (report, failures)
+}
+
+fn cases() -> Vec<Case> {
+    let ws = workspace();
+    let xml = |name: &str| ws.join(format!("renderer/tests/mitsuba-scenes/{name}.xml"));
+    let own = |name: &'static str, width, height, spp| Case { name, ours: xml(name), mitsuba: Some(xml(name)), width, height, spp, max_depth: 6 };
+    let veach = ws.join("scenes/assets/veach-ajar/scene.xml");
+    vec![
+        Case { name: "cornell-box", ours: ws.join("scenes/cornell-box/scene.toml"), mitsuba: None, width: 48, height: 48, spp: 512, max_depth: 6 },
+        Case { name: "veach-ajar", ours: veach.clone(), mitsuba: Some(veach), width: 64, height: 36, spp: 512, max_depth: 6 },
+        own("metals", 48, 48, 512),
+        own("glass", 48, 48, 512),
+        own("plastics", 48, 48, 512),
+    ]
+}
+
+#[test]
+fn matches_mitsuba_pixel_by_pixel() {
+    let venv = workspace().join("target/mitsuba-venv");
+    let probe = "import mitsuba as mi, numpy; mi.set_variant('scalar_rgb'); print(mi.__version__)";
+    let v = tools_venv(&venv, &[MITSUBA, "numpy"], probe).unwrap_or_else(|e| {
+        panic!("the Mitsuba cross-check needs python3 -m venv and `pip install {MITSUBA} numpy` (PyPI) to work: {e}")
+    });
+    println!("Mitsuba {} (scalar_rgb), family-wise alpha {ALPHA} per test and scene", v.probe);
+    let out_dir = workspace().join("target/mitsuba-crosscheck");
+    std::fs::create_dir_all(&out_dir).unwrap();
+    let only = std::env::var("PIXGUIDE_MITSUBA_CASES").ok();
+    let mut failures = Vec::new();
+    let mut all = String::new();
+    let mut cases = cases();
+    // Ad-hoc scenes for looking into a disagreement: PIXGUIDE_MITSUBA_EXTRA=a.xml,b.xml.
+    if let Ok(extra) = std::env::var("PIXGUIDE_MITSUBA_EXTRA") {
+        for p in extra.split(',') {
+            let name: &'static str = Box::leak(Path::new(p).file_stem().unwrap().to_string_lossy().into_owned().into_boxed_str());
+            let depth = std::env::var("PIXGUIDE_MITSUBA_DEPTH").ok().and_then(|d| d.parse().ok()).unwrap_or(6);
+            cases.push(Case { name, ours: p.into(), mitsuba: Some(p.into()), width: 32, height: 32, spp: 512, max_depth: depth });
+        }
+    }
+    for case in cases {
+        if only.as_deref().is_some_and(|o| !o.split(',').any(|n| n == case.name)) {
+            continue;
+        }
+        let (report, f) = check_case(&v.python, &case, &out_dir);
+        failures.extend(f);
+        print!("{report}");
+        all.push_str(&report);
+    }
+    std::fs::write(out_dir.join("report.txt"), &all).unwrap();
+    assert!(failures.is_empty(), "our renders disagree with Mitsuba's:\n{}", failures.join("\n"));
+}
+
+#[test]
+fn statistics_helpers_are_right() {
+    // Standard normal limit and known t quantiles.
+    assert!((t_two_sided_p(1.959964, 1e7) - 0.05).abs() < 1e-5);
+    assert!((t_two_sided_p(2.228139, 10.0) - 0.05).abs() < 1e-5);
+    assert!((t_two_sided_p(12.7062, 1.0) - 0.05).abs() < 1e-4);
+    assert!((t_threshold(0.01, 30.0) - 2.749996).abs() < 1e-4);
+    assert!((t_threshold(1e-6, 1e7) - 4.891638).abs() < 1e-3);
+    assert!((sidak(0.05, 1) - 0.05).abs() < 1e-12);
+    assert!((sidak(0.01, 100) - (1.0 - 0.99f64.powf(0.01))).abs() < 1e-15);
+}
