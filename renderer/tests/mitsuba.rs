@@ -394,3 +394,30 @@ fn bad_texture_references_name_the_file_and_field() {
     );
     assert!(e.contains("line 2") && e.contains("reflectance") && e.contains("gone.jpg"), "{e}");
 }
+
+/// An approximated feature (anisotropic roughness made isotropic) loads with a warning, and a
+/// strict load refuses it with the file, the line and the substitution named; a scene without
+/// approximations loads strictly too (so the refusal is about the feature, not the mode).
+#[test]
+fn strict_loading_refuses_substitutions_by_line() {
+    let dir = std::env::temp_dir().join(format!("pixguide-mitsuba-{}-strict", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = |bsdf: &str| {
+        format!(
+            r#"<scene version="3.0.0">{CAMERA}
+  <shape type="rectangle">{bsdf}</shape>
+  <emitter type="constant"><rgb name="radiance" value="1"/></emitter></scene>"#
+        )
+    };
+    let aniso = dir.join("aniso.xml");
+    std::fs::write(&aniso, scene(r#"<bsdf type="roughconductor"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.4"/></bsdf>"#)).unwrap();
+    let plain = dir.join("plain.xml");
+    std::fs::write(&plain, scene(r#"<bsdf type="roughconductor"><float name="alpha" value="0.2"/></bsdf>"#)).unwrap();
+    assert!(Scene::load(&aniso).is_ok(), "a substitution is only a warning by default");
+    let e = Scene::load_strict(&aniso).err().expect("strict load must refuse the substitution").to_string();
+    assert!(e.contains("aniso.xml") && e.contains("line 4") && e.contains("anisotropic roughness"), "{e}");
+    assert!(Scene::load_strict(&plain).is_ok());
+    // The strict mode ends with its load: a later normal load only warns.
+    assert!(Scene::load(&aniso).is_ok());
+    std::fs::remove_dir_all(&dir).ok();
+}

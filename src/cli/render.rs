@@ -67,6 +67,11 @@ pub struct RenderArgs {
     /// Don't show the progress bar.
     #[arg(short, long)]
     pub quiet: bool,
+    /// Refuse to render a scene with features the loader would approximate (a Mitsuba texture on
+    /// a parameter that takes a colour, anisotropic roughness, …): each becomes an error naming
+    /// its file, line and substitution instead of a warning.
+    #[arg(long)]
+    pub strict: bool,
 }
 
 /// `--denoise` value: a model, or none. (A newtype because clap reads `Option<T>` fields as
@@ -111,7 +116,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
             std::fs::create_dir_all(dir).with_context(|| format!("creating the output folder {}", dir.display()))?;
         }
     }
-    let mut scene = Scene::load(&a.scene)?;
+    let mut scene = if a.strict { Scene::load_strict(&a.scene)? } else { Scene::load(&a.scene)? };
     if let Some((w, h)) = a.size {
         // The camera derives its angles from its fov axis and the image size (Camera::ray).
         scene.camera.width = w;

@@ -21,8 +21,28 @@ pub const MAX_RESOLUTION_PIXELS: u64 = 1 << 26;
 /// Vertical field of view (degrees) of a camera made up to frame the scene.
 pub const FRAMING_FOV_DEG: f32 = 40.0;
 
+thread_local! {
+    /// The substitutions of a strict load on this thread (`Scene::load_strict`); `None` when
+    /// loading normally, where they are printed as warnings.
+    static REFUSED: std::cell::RefCell<Option<Vec<String>>> = const { std::cell::RefCell::new(None) };
+}
+
+/// A feature the loader does not model and replaces by something close: printed as a warning, or
+/// collected during a strict load, which then fails with all of them.
 pub(crate) fn warn(file: &Path, message: impl std::fmt::Display) {
-    eprintln!("warning: {}: {message}", file.display());
+    let message = format!("{}: {message}", file.display());
+    let collected = REFUSED.with(|r| r.borrow_mut().as_mut().map(|v| v.push(message.clone())).is_some());
+    if !collected {
+        eprintln!("warning: {message}");
+    }
+}
+
+/// Runs `load` collecting its substitutions instead of printing them; returns them with the result.
+pub(crate) fn collecting_substitutions<T>(load: impl FnOnce() -> T) -> (T, Vec<String>) {
+    REFUSED.with(|r| *r.borrow_mut() = Some(Vec::new()));
+    let out = load();
+    let refused = REFUSED.with(|r| r.borrow_mut().take()).unwrap_or_default();
+    (out, refused)
 }
 
 pub(crate) struct Builder {

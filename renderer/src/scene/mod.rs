@@ -105,6 +105,18 @@ impl Scene {
         Scene::new(path, desc)
     }
 
+    /// As [`Scene::load`], but a feature the loader would replace by an approximation (each
+    /// named by its file, line and substitution) is an error instead of a warning.
+    pub fn load_strict(path: &Path) -> Result<Scene> {
+        let (desc, refused) = builder::collecting_substitutions(|| load_description(path));
+        let desc = desc?;
+        if !refused.is_empty() {
+            let list = refused.iter().map(|m| format!("\n  {m}")).collect::<String>();
+            return Err(Error::scene(path, "strict", format!("{} substitution(s) refused:{list}", refused.len())));
+        }
+        Scene::new(path, desc)
+    }
+
     /// Surface geometry of a hit returned by `accel.intersect(ray, ..)`.
     pub fn surface(&self, ray: &Ray, hit: &Hit) -> SurfaceHit {
         let i = hit.prim as usize;
