@@ -659,27 +659,15 @@ mod tests {
         let x: Vec<f64> = (0..dims.iter().product()).map(|i| if i % 16 < 7 { 0.02 } else { 1.0 } + 0.01 * rng.next_f64()).collect();
         let mut net = cfg.init(1, &d);
         let taps = 9;
-        for s in 0..cfg.kernel_scales {
-            let n = cfg.head_channels(s);
-            let c = net.heads[s].weight.dims()[1];
+        set_constant_heads(&mut net, &cfg, |_, n| {
             let mut bias = vec![-60.0f32; n];
             bias[taps / 2] = 60.0;
             if n > taps {
                 bias[taps] = 60.0; // α = 1
             }
-            net.heads[s].weight = burn::module::Param::from_tensor(Tensor::zeros([n, c, 1, 1], &d));
-            net.heads[s].bias = burn::module::Param::from_tensor(Tensor::from_data(burn::tensor::TensorData::new(bias, [n]), &d));
-        }
-        let out = to_vec(net.forward(tensor(&x, dims, &d)));
-        let (m, o) = (cfg.margin, 16 - 2 * cfg.margin);
-        let mut worst = 0.0f64;
-        for c in 0..3 {
-            for y in 0..o {
-                for xx in 0..o {
-                    worst = worst.max((out[(c * o + y) * o + xx] - x[(c * 16 + y + m) * 16 + xx + m]).abs());
-                }
-            }
-        }
+            bias
+        });
+        let worst = largest_change(&net, &cfg, &x, 16);
         assert!(worst < 1e-5, "identity kernels with α = 1 changed the input by {worst}");
     }
 
@@ -698,27 +686,15 @@ mod tests {
             .collect();
         for (strength, expect_sharp) in [(12.0f32, true), (-12.0, false)] {
             let mut net = cfg.init(1, &d);
-            for s in 0..cfg.kernel_scales {
-                let n = cfg.head_channels(s);
-                let c = net.heads[s].weight.dims()[1];
+            set_constant_heads(&mut net, &cfg, |s, n| {
                 let mut bias = vec![0.0f32; n];
                 if s + 1 < cfg.kernel_scales {
                     bias[9] = -60.0; // α = 0
                 }
                 bias[n - 1] = strength;
-                net.heads[s].weight = burn::module::Param::from_tensor(Tensor::zeros([n, c, 1, 1], &d));
-                net.heads[s].bias = burn::module::Param::from_tensor(Tensor::from_data(burn::tensor::TensorData::new(bias, [n]), &d));
-            }
-            let out = to_vec(net.forward(tensor(&x, dims, &d)));
-            let (m, o) = (cfg.margin, 16 - 2 * cfg.margin);
-            let mut worst = 0.0f64;
-            for c in 0..3 {
-                for y in 0..o {
-                    for xx in 0..o {
-                        worst = worst.max((out[(c * o + y) * o + xx] - x[(c * 16 + y + m) * 16 + xx + m]).abs());
-                    }
-                }
-            }
+                bias
+            });
+            let worst = largest_change(&net, &cfg, &x, 16);
             if expect_sharp {
                 assert!(worst < 1e-5, "edge-stopped box kernels moved the edge by {worst}");
             } else {
@@ -742,34 +718,50 @@ mod tests {
             .collect();
         for (strength, expect_sharp) in [(12.0f32, true), (-12.0, false)] {
             let mut net = cfg.init(1, &d);
-            for s in 0..cfg.kernel_scales {
-                let n = cfg.head_channels(s);
-                let c = net.heads[s].weight.dims()[1];
+            set_constant_heads(&mut net, &cfg, |s, n| {
                 let mut bias = vec![-60.0f32; n];
                 bias[4] = 60.0; // identity kernel
                 if s + 1 < cfg.kernel_scales {
                     bias[9] = 60.0; // α = 1
                 }
                 bias[n - 1] = strength;
-                net.heads[s].weight = burn::module::Param::from_tensor(Tensor::zeros([n, c, 1, 1], &d));
-                net.heads[s].bias = burn::module::Param::from_tensor(Tensor::from_data(burn::tensor::TensorData::new(bias, [n]), &d));
-            }
-            let out = to_vec(net.forward(tensor(&x, dims, &d)));
-            let (m, o) = (cfg.margin, 16 - 2 * cfg.margin);
-            let mut worst = 0.0f64;
-            for c in 0..3 {
-                for y in 0..o {
-                    for xx in 0..o {
-                        worst = worst.max((out[(c * o + y) * o + xx] - x[(c * 16 + y + m) * 16 + xx + m]).abs());
-                    }
-                }
-            }
+                bias
+            });
+            let worst = largest_change(&net, &cfg, &x, 16);
             if expect_sharp {
                 assert!(worst < 1e-4, "joint-bilateral upsampling moved the edge by {worst}");
             } else {
                 assert!(worst > 0.1, "bilinear upsampling should blur the edge ({worst})");
             }
         }
+    }
+
+    /// Sets every head to a constant output: zero weights and `bias(scale, channels)`.
+    fn set_constant_heads(net: &mut MsKpNet, cfg: &MsKpConfig, bias: impl Fn(usize, usize) -> Vec<f32>) {
+        let d = cpu_device();
+        for s in 0..cfg.kernel_scales {
+            let n = cfg.head_channels(s);
+            let c = net.heads[s].weight.dims()[1];
+            net.heads[s].weight = burn::module::Param::from_tensor(Tensor::zeros([n, c, 1, 1], &d));
+            net.heads[s].bias = burn::module::Param::from_tensor(Tensor::from_data(burn::tensor::TensorData::new(bias(s, n), [n]), &d));
+        }
+    }
+
+    /// The largest difference between the column's output and its colour input (one image,
+    /// `side`², cropped by the margin).
+    fn largest_change(net: &MsKpNet, cfg: &MsKpConfig, x: &[f64], side: usize) -> f64 {
+        let c_in = x.len() / (side * side);
+        let out = to_vec(net.forward(tensor(x, [1, c_in, side, side], &cpu_device())));
+        let (m, o) = (cfg.margin, side - 2 * cfg.margin);
+        let mut worst = 0.0f64;
+        for c in 0..3 {
+            for y in 0..o {
+                for xx in 0..o {
+                    worst = worst.max((out[(c * o + y) * o + xx] - x[(c * side + y + m) * side + xx + m]).abs());
+                }
+            }
+        }
+        worst
     }
 
     #[test]
