@@ -18,10 +18,11 @@ use denoiser::burn::grad_clipping::GradientClippingConfig;
 use denoiser::burn::optim::{AdamConfig, GradientsParams};
 use denoiser::burn::tensor::{Device, Tensor, TensorData};
 use denoiser::infer::{self, InferOptions};
-use denoiser::loss::{l1, path_disentangling_loss};
 use denoiser::method::{Method, MethodModel};
 use denoiser::model::{BranchInput, DenoiserConfig};
-use denoiser::preprocess::InputTensors;
+use denoiser::preprocess::{InputTensors, TargetTensors};
+use denoiser::train::schedule::{LrShape, Stage, StageKind};
+use denoiser::train::stage_loss;
 use denoiser::rng::SplitMix64;
 use denoiser::train::checkpoint::parameters;
 use denoiser::weights::{self, Provenance};
@@ -51,17 +52,14 @@ fn train(cfg: &DenoiserConfig, method: Method, steps: usize, b: usize, size: usi
     let inputs = InputTensors { diffuse, specular, path_weight: Tensor::zeros([b, 1, size, size], &device) };
     let t_diff = random(&mut data, [b, 3, o, o], &device);
     let t_spec = random(&mut data, [b, 3, o, o], &device);
+    // The first stage's loss (per-branch L1, + 0.1·L_path where the method has PathNets), as training computes it.
+    let targets = TargetTensors { total: t_diff.clone() + t_spec.clone(), diffuse: t_diff, specular: t_spec };
+    let stage = Stage { kind: StageKind::Branches, steps: 1, lr_rest: None, lr_e: None, w_path: 0.1, shape: LrShape::Constant };
     let mut optim = AdamConfig::new().with_epsilon(1e-8).with_grad_clipping(Some(GradientClippingConfig::Value(1.0))).init();
     let mut rng = SplitMix64::new(1);
     for step in 0..steps {
         let out = model.forward(inputs.clone());
-        let (d, s) = (out.diffuse, out.specular);
-        let mut loss = l1(d.output, t_diff.clone()) + l1(s.output, t_spec.clone());
-        if let (Some(dp), Some(sp)) = (d.path, s.path) {
-            loss = loss
-                + path_disentangling_loss(dp.samples, t_diff.clone(), &mut rng).mul_scalar(0.1)
-                + path_disentangling_loss(sp.samples, t_spec.clone(), &mut rng).mul_scalar(0.1);
-        }
+        let loss = stage_loss(out, &targets, &stage, &mut rng);
         let value: f32 = loss.clone().into_scalar();
         println!("  {} step {step}: loss {value:.6}", backend.name());
         let grads = GradientsParams::from_grads(loss.backward(), &model);

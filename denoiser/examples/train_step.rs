@@ -16,12 +16,13 @@ use std::time::Instant;
 use denoiser::burn::grad_clipping::GradientClippingConfig;
 use denoiser::burn::optim::{AdamConfig, GradientsParams};
 use denoiser::burn::tensor::{Distribution, Tensor};
-use denoiser::loss::{l1, path_disentangling_loss};
 use denoiser::method::{Method, MethodModel, Part};
 use denoiser::kpcn::{KpcnConfig, Variant};
 use denoiser::layers::conv_macs;
 use denoiser::model::{BranchInput, DenoiserConfig};
-use denoiser::preprocess::InputTensors;
+use denoiser::preprocess::{InputTensors, TargetTensors};
+use denoiser::train::schedule::{LrShape, Stage, StageKind};
+use denoiser::train::stage_loss;
 use denoiser::rng::SplitMix64;
 use denoiser::Backend;
 
@@ -108,6 +109,9 @@ fn main() {
     let inputs = InputTensors { diffuse: input(&device), specular: input(&device), path_weight: Tensor::zeros([b, 1, size, size], &device) };
     let t_diff = Tensor::<4>::random([b, 3, o, o], u, &device);
     let t_spec = Tensor::<4>::random([b, 3, o, o], u, &device);
+    // The first stage's loss (per-branch L1, + 0.1·L_path where the method has PathNets), as training computes it.
+    let targets = TargetTensors { total: t_diff.clone() + t_spec.clone(), diffuse: t_diff, specular: t_spec };
+    let stage = Stage { kind: StageKind::Branches, steps: 1, lr_rest: None, lr_e: None, w_path: 0.1, shape: LrShape::Constant };
     let mut optim = AdamConfig::new()
         .with_epsilon(1e-8)
         .with_grad_clipping(Some(GradientClippingConfig::Value(1.0)))
@@ -131,13 +135,7 @@ fn main() {
             lap[k] += t;
         });
         let t_loss = Instant::now();
-        let (d, s) = (out.diffuse, out.specular);
-        let mut loss = l1(d.output, t_diff.clone()) + l1(s.output, t_spec.clone());
-        if let (Some(dp), Some(sp)) = (d.path, s.path) {
-            loss = loss
-                + path_disentangling_loss(dp.samples, t_diff.clone(), &mut rng).mul_scalar(0.1)
-                + path_disentangling_loss(sp.samples, t_spec.clone(), &mut rng).mul_scalar(0.1);
-        }
+        let loss = stage_loss(out, &targets, &stage, &mut rng);
         let value: f32 = loss.clone().into_scalar();
         lap[4] = t_loss.elapsed().as_secs_f64();
         let t_back = Instant::now();
