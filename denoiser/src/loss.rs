@@ -32,6 +32,21 @@ pub fn rel_mse_val<const D: usize>(x: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
     ((x - y).square() / den).mean().mul_scalar(0.5)
 }
 
+/// The test relMSE of `pixguide eval` ([`crate::metrics::rel_mse`] with tone map (a), ε 1e-4)
+/// on `[B, 3, H, W]` radiance, for validation: no gradient flows, so the tone map is the exact
+/// one (no offset), clipped to [0, 1] as the metric does. Checkpoints chosen by the linear
+/// [`rel_mse_val`] kept fireflies that the test metric punishes (docs/training.md).
+pub fn rel_mse_test(x: Tensor<4>, y: Tensor<4>) -> Tensor<1> {
+    let tm = |c: Tensor<4>| {
+        let c = c.clamp_min(0.0);
+        let lum = c.clone().narrow(1, 0, 1).mul_scalar(0.2126) + c.clone().narrow(1, 1, 1).mul_scalar(0.7152) + c.clone().narrow(1, 2, 1).mul_scalar(0.0722);
+        (c / lum.div_scalar(1.5).add_scalar(1.0)).powf_scalar(1.0 / 2.2).clamp(0.0, 1.0)
+    };
+    let (x, y) = (tm(x), tm(y));
+    let den = y.clone().square().add_scalar(1e-4);
+    ((x - y).square() / den).mean()
+}
+
 /// Pseudo-label tone map of the disentangling loss: τ(x) = (max(x,0)/(1+max(x,0)))^(1/2.2).
 pub fn tonemap_label<const D: usize>(t: Tensor<D>) -> Tensor<D> {
     let t = t.clamp_min(0.0);
@@ -101,6 +116,23 @@ mod tests {
         let g = l1_tonemapped(x.clone(), img(0.5)).backward();
         let grad = crate::test_util::grad_of(&x, &g);
         assert!(grad.iter().all(|v| v.is_finite() && *v != 0.0), "{grad:?}");
+    }
+
+    /// Validation scores what `pixguide eval` scores: the tensor version equals the CPU metric
+    /// (tone map (a), ε 1e-4) on an image with black, negative, bright and ordinary pixels, to
+    /// f32 rounding (1e-5 relative).
+    #[test]
+    fn validation_metric_is_the_test_metric() {
+        let d = cpu_device();
+        let (w, h) = (4usize, 3usize);
+        let mut rng = crate::rng::SplitMix64::new(5);
+        let y: Vec<f32> = (0..3 * w * h).map(|i| if i % 7 == 0 { 0.0 } else { 2.0 + 2.0 * rng.symmetric(1.0) }).collect();
+        let x: Vec<f32> = y.iter().enumerate().map(|(i, v)| if i % 5 == 0 { -0.3 } else { v * (1.0 + 0.5 * rng.symmetric(1.0)) + 0.01 }).collect();
+        let planar = |v: &[f32]| -> Vec<f64> { (0..3).flat_map(|c| (0..w * h).map(move |p| v[3 * p + c] as f64)).collect() };
+        let t = |v: &[f32]| tensor(&planar(v), [1, 3, h, w], &d);
+        let got = scalar(rel_mse_test(t(&x), t(&y)));
+        let want = crate::metrics::rel_mse(&x, &y, w, h, crate::metrics::ToneMap::Paper, 0);
+        assert!((got - want).abs() < 1e-5 * want, "tensor {got} vs metric {want}");
     }
 
     #[test]

@@ -110,12 +110,20 @@ impl DenoiserConfig {
         c
     }
 
+    /// `edge` with the colour guide measured in units of the colour's noise
+    /// ([`EdgeStopping::FeaturesAndNoisyColour`]) instead of brighter-only log differences.
+    pub fn edge_noise() -> Self {
+        let mut c = Self::edge();
+        c.mskp = c.mskp.map(|m| m.with_edge_stopping(EdgeStopping::FeaturesAndNoisyColour));
+        c
+    }
+
     /// Preset names, for help texts and errors.
-    pub const PRESETS: [&'static str; 7] = ["default", "half", "swap", "edge", "kpcn", "paper-half", "paper"];
+    pub const PRESETS: [&'static str; 8] = ["default", "half", "swap", "edge", "edge-noise", "kpcn", "paper-half", "paper"];
 
     /// `default` (multi-scale U-Net columns), `half` (of default), `swap` (default with the
     /// patented low-band-swap compositor at five scales, opt-in), `edge` (five scales,
-    /// edge-stopping kernels), `kpcn` (the CPU-sized KPCN),
+    /// edge-stopping kernels), `edge-noise` (its colour guide noise-normalised), `kpcn` (the CPU-sized KPCN),
     /// `paper-half` or `paper`.
     pub fn preset(name: &str) -> Option<Self> {
         match name {
@@ -123,6 +131,7 @@ impl DenoiserConfig {
             "half" => Some(Self::half()),
             "swap" => Some(Self::swap()),
             "edge" => Some(Self::edge()),
+            "edge-noise" => Some(Self::edge_noise()),
             "kpcn" => Some(Self::kpcn_cpu()),
             "paper-half" => Some(Self::paper_half()),
             "paper" => Some(Self::paper()),
@@ -151,7 +160,7 @@ impl DenoiserConfig {
         self.mskp.clone().map(|mut c| {
             c.in_channels = v.in_channels();
             if c.edge_stopping != EdgeStopping::Off {
-                c.guides = edge_guides(v, c.edge_stopping == EdgeStopping::FeaturesAndColour);
+                c.guides = edge_guides(v, c.edge_stopping);
             }
             c
         })
@@ -163,9 +172,17 @@ impl DenoiserConfig {
 /// kept every firefly: validation relMSE 0.41–1.07 where plain kernels had 0.015); then what the
 /// variant adds: normal, depth (×20: it is path length over 10 scene radii, so neighbours differ
 /// by hundredths) and albedo for G, the path features f_P for P.
-fn edge_guides(v: Variant, colour: bool) -> Vec<GuideGroup> {
+fn edge_guides(v: Variant, stopping: EdgeStopping) -> Vec<GuideGroup> {
     use crate::kpcn::channels::*;
-    let colour = colour.then(|| GuideGroup::new(0, 3, 1.0, true).brighter_only());
+    let colour = match stopping {
+        EdgeStopping::FeaturesAndColour => Some(GuideGroup::new(0, 3, 1.0, true).brighter_only()),
+        // Channel 3 is the variance of the colour's mean in the colour's own units
+        // (preprocess.rs). e^−3: a jump of 3σ in every channel keeps ~30 % of a tap's weight,
+        // one of 10σ none, so the guide acts from the first step instead of waiting for the
+        // strength to grow from e^−6.
+        EdgeStopping::FeaturesAndNoisyColour => Some(GuideGroup::new(0, 3, 1.0, false).with_variance(3).with_init_log_strength(-3.0)),
+        EdgeStopping::Features | EdgeStopping::Off => None,
+    };
     let g = COLOUR_BLOCK;
     let g_block = vec![GuideGroup::new(g, 3, 1.0, false), GuideGroup::new(g + 10, 1, 20.0, false), GuideGroup::new(g + G_ALBEDO, 3, 1.0, false)];
     let f_p = |at: usize| vec![GuideGroup::new(at, P_FEATURES, 1.0, false)];

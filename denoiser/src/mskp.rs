@@ -87,6 +87,11 @@ pub enum EdgeStopping {
     Features,
     /// Those plus the colour, brighter taps only.
     FeaturesAndColour,
+    /// The features plus the colour, its differences measured in units of their own noise
+    /// (Rousselle et al. 2012): a difference the per-pixel variance explains costs nothing, so
+    /// noisy pixels still average, and as the variance falls with more samples every real
+    /// difference stops the kernel, which tends to the identity on a converged input.
+    FeaturesAndNoisyColour,
 }
 
 /// Input channels `start..start + len` used as an edge-stopping guide, multiplied by `scale`
@@ -94,6 +99,13 @@ pub enum EdgeStopping {
 /// counts only how much a tap exceeds the centre, Σ max(g(q) − g(p), 0)²: on the noisy colour a
 /// symmetric distance would keep every firefly (its neighbours all look far from it), while this
 /// one only stops light from flowing in from brighter taps, fireflies included.
+///
+/// A guide with a `variance` channel (the per-pixel variance of the mean of channels
+/// `start..start + len`, in their units) is noise-normalised: a tap's distance is
+/// Σ_c max((g_c(q) − g_c(p))² − (v_p + min(v_p, v_q)), 0) / (ε + v_p + v_q), the non-local-means
+/// distance of Rousselle et al. 2012 (docs/method.md §12): the subtraction removes what the noise
+/// alone adds to a squared difference, the division puts it in units of that noise. Its strength
+/// starts at `init_log_strength` (e^`GUIDE_STRENGTH_INIT` when `None`).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GuideGroup {
     pub start: usize,
@@ -102,15 +114,65 @@ pub struct GuideGroup {
     pub log: bool,
     #[serde(default)]
     pub brighter_only: bool,
+    #[serde(default)]
+    pub variance: Option<usize>,
+    #[serde(default)]
+    pub init_log_strength: Option<f32>,
 }
 
 impl GuideGroup {
     pub fn new(start: usize, len: usize, scale: f64, log: bool) -> Self {
-        GuideGroup { start, len, scale, log, brighter_only: false }
+        GuideGroup { start, len, scale, log, brighter_only: false, variance: None, init_log_strength: None }
     }
 
     pub fn brighter_only(self) -> Self {
         GuideGroup { brighter_only: true, ..self }
+    }
+
+    /// Noise-normalised distances, with the variance of the mean in input channel `channel`.
+    pub fn with_variance(self, channel: usize) -> Self {
+        GuideGroup { variance: Some(channel), ..self }
+    }
+
+    pub fn with_init_log_strength(self, s: f32) -> Self {
+        GuideGroup { init_log_strength: Some(s), ..self }
+    }
+}
+
+/// A guide group's features at one pyramid level, with the variance of their mean for a
+/// noise-normalised group.
+#[derive(Clone, Debug)]
+pub struct GuideLevel {
+    x: Tensor<4>,
+    var: Option<Tensor<4>>,
+    brighter_only: bool,
+}
+
+impl GuideLevel {
+    /// The next coarser level: 2×2 box means, whose variance is a quarter of the mean variance
+    /// (independent pixels).
+    fn down(&self) -> Self {
+        GuideLevel { x: box_down(self.x.clone()), var: self.var.clone().map(|v| box_down(v).div_scalar(4.0)), brighter_only: self.brighter_only }
+    }
+}
+
+/// Keeps a noise-normalised distance finite where both variances are 0 (a pixel whose samples
+/// all agree); in the colour's units squared, far below any visible difference.
+const NOISE_EPS: f32 = 1e-4;
+
+/// Guide distances between taps q `[B, C, T, N]` (variances `[B, 1, T, N]`) and centres p
+/// `[B, C, 1, N]` (`[B, 1, 1, N]`) → `[B, T, N]`.
+fn guide_distance(q: Tensor<4>, p: Tensor<4>, var: Option<(Tensor<4>, Tensor<4>)>, brighter_only: bool) -> Tensor<3> {
+    let diff = q - p;
+    let diff = if brighter_only { diff.clamp_min(0.0) } else { diff };
+    let d2 = diff.square();
+    match var {
+        None => d2.sum_dim(1).squeeze_dim(1),
+        Some((vq, vp)) => {
+            let min = (vq.clone() + vp.clone() - (vq.clone() - vp.clone()).abs()).mul_scalar(0.5);
+            let excess = (d2 - (vp.clone() + min)).clamp_min(0.0);
+            (excess / (vq + vp).add_scalar(NOISE_EPS)).sum_dim(1).squeeze_dim(1)
+        }
     }
 }
 
@@ -156,7 +218,7 @@ impl MsKpConfig {
             }
             if l < self.kernel_scales {
                 let taps = (self.filter_size * self.filter_size) as u64;
-                let guide_channels: u64 = self.guides.iter().map(|g| g.len as u64 + 1).sum();
+                let guide_channels: u64 = self.guides.iter().map(|g| g.len as u64 + 1 + if g.variance.is_some() { 2 * g.len as u64 + 3 } else { 0 }).sum();
                 total += (conv_macs(w[l], self.head_channels(l), 1) + (3 + guide_channels) * taps) as f64 / area;
             }
         }
@@ -203,6 +265,7 @@ impl MsKpConfig {
         assert!(self.filter_size % 2 == 1, "filter size must be odd");
         for g in &self.guides {
             assert!(g.len > 0 && g.start + g.len <= self.in_channels, "guide channels {}..{} outside the {} inputs", g.start, g.start + g.len, self.in_channels);
+            assert!(g.variance.is_none_or(|v| v < self.in_channels), "guide variance channel {:?} outside the {} inputs", g.variance, self.in_channels);
         }
         let hidden = Init::XavierUniform { gain: std::f64::consts::SQRT_2 };
         let block = |cin: usize, cout: usize, tag: u64| {
@@ -231,7 +294,8 @@ impl MsKpConfig {
                         // e^0 cut every tap wherever the G-buffer is noisy (behind glass, on
                         // caustics), and 2900 steps did not unlearn it (docs/denoiser.md).
                         let n = self.head_channels(s);
-                        let bias: Vec<f32> = (0..n).map(|i| if i + self.guides.len() >= n { GUIDE_STRENGTH_INIT } else { 0.0 }).collect();
+                        let first = n - self.guides.len();
+                        let bias: Vec<f32> = (0..n).map(|i| if i >= first { self.guides[i - first].init_log_strength.unwrap_or(GUIDE_STRENGTH_INIT) } else { 0.0 }).collect();
                         head.bias = burn::module::Param::from_tensor(Tensor::from_data(burn::tensor::TensorData::new(bias, [n]), device));
                     }
                     head
@@ -295,27 +359,29 @@ fn pad_reflect(x: Tensor<4>, r: usize) -> Tensor<4> {
     x.pad([(r, r), (r, r)], mode)
 }
 
-/// Σ_c (g_c(q) − g_c(p))² for every tap q of the k×k window around each pixel p (only the
-/// positive differences if `brighter_only`): `[B, C, H, W]` → `[B, k², H, W]`, taps in the
-/// kernel map's order.
-pub fn tap_distances(g: Tensor<4>, k: usize, brighter_only: bool) -> Tensor<4> {
-    let [b, c, h, w] = g.dims();
-    let cols = unfold4d(pad_reflect(g.clone(), k / 2), [k, k], UnfoldOptions::new([1, 1], [0, 0], [1, 1]));
-    let cols = cols.reshape([b, c, k * k, h * w]);
-    let diff = cols - g.reshape([b, c, 1, h * w]);
-    let diff = if brighter_only { diff.clamp_min(0.0) } else { diff };
-    diff.square().sum_dim(1).reshape([b, k * k, h, w])
+/// The guide distance (Σ_c (g_c(q) − g_c(p))², only the positive differences if
+/// `brighter_only`, noise-normalised with a variance: [`GuideGroup`]) for every tap q of the k×k
+/// window around each pixel p: `[B, C, H, W]` → `[B, k², H, W]`, taps in the kernel map's order.
+pub fn tap_distances(g: &GuideLevel, k: usize) -> Tensor<4> {
+    let [b, c, h, w] = g.x.dims();
+    let windows = |x: &Tensor<4>| {
+        let c = x.dims()[1];
+        unfold4d(pad_reflect(x.clone(), k / 2), [k, k], UnfoldOptions::new([1, 1], [0, 0], [1, 1])).reshape([b, c, k * k, h * w])
+    };
+    let var = g.var.as_ref().map(|v| (windows(v), v.clone().reshape([b, 1, 1, h * w])));
+    guide_distance(windows(&g.x), g.x.clone().reshape([b, c, 1, h * w]), var, g.brighter_only).reshape([b, k * k, h, w])
 }
 
-/// The guide groups' features, scaled (and log-compressed where asked), `[B, C_g, H, W]`, with
-/// their `brighter_only` flags, in the group order.
-fn guide_features(input: &Tensor<4>, guides: &[GuideGroup]) -> Vec<(Tensor<4>, bool)> {
+/// The guide groups' features at full size, scaled (and log-compressed where asked), with their
+/// variances for noise-normalised groups (scaled alike, clamped at 0), in the group order.
+fn guide_features(input: &Tensor<4>, guides: &[GuideGroup]) -> Vec<GuideLevel> {
     guides
         .iter()
         .map(|g| {
             let x = input.clone().narrow(1, g.start, g.len);
             let x = if g.log { x.clamp_min(0.0).log1p() } else { x };
-            (x.mul_scalar(g.scale), g.brighter_only)
+            let var = g.variance.map(|v| input.clone().narrow(1, v, 1).clamp_min(0.0).mul_scalar(g.scale * g.scale));
+            GuideLevel { x: x.mul_scalar(g.scale), var, brighter_only: g.brighter_only }
         })
         .collect()
 }
@@ -368,14 +434,13 @@ fn coarse_windows(x: Tensor<4>, fh: usize, fw: usize) -> Tensor<4> {
 /// exp(−Σ_g s_g(p)·‖g(q) − g(p)‖²), renormalised, where g(q) are the coarse level's guides and
 /// g(p) this level's. Plain bilinear upsampling carried a quarter of a bright coarse pixel across
 /// every silhouette into the convex blend (docs/denoiser.md, "Error floors").
-fn joint_upsample(coarse: Tensor<4>, coarse_guides: &[(Tensor<4>, bool)], fine_guides: &[(Tensor<4>, bool)], strength: Tensor<4>, fh: usize, fw: usize) -> Tensor<4> {
+fn joint_upsample(coarse: Tensor<4>, coarse_guides: &[GuideLevel], fine_guides: &[GuideLevel], strength: Tensor<4>, fh: usize, fw: usize) -> Tensor<4> {
     let [b, c, h, w] = coarse.dims();
     let mut logits = fit_to(bilinear_tap_logits(h, w, &coarse.device()), fh, fw).reshape([1, 9, fh * fw]);
-    for (i, ((cg, brighter_only), (fg, _))) in coarse_guides.iter().zip(fine_guides).enumerate() {
-        let gc = fg.dims()[1];
-        let diff = coarse_windows(cg.clone(), fh, fw) - fg.clone().reshape([b, gc, 1, fh * fw]);
-        let diff = if *brighter_only { diff.clamp_min(0.0) } else { diff };
-        let d = diff.square().sum_dim(1).reshape([b, 9, fh * fw]);
+    for (i, (cg, fg)) in coarse_guides.iter().zip(fine_guides).enumerate() {
+        let gc = fg.x.dims()[1];
+        let var = cg.var.as_ref().zip(fg.var.as_ref()).map(|(cv, fv)| (coarse_windows(cv.clone(), fh, fw), fv.clone().reshape([b, 1, 1, fh * fw])));
+        let d = guide_distance(coarse_windows(cg.x.clone(), fh, fw), fg.x.clone().reshape([b, gc, 1, fh * fw]), var, fg.brighter_only);
         logits = logits - d * strength.clone().narrow(1, i, 1).reshape([b, 1, fh * fw]);
     }
     let wts = softmax(logits, 1).reshape([b, 1, 9, fh * fw]);
@@ -435,24 +500,24 @@ impl MsKpNet {
 
     /// Filters and composites the colour `[B, 3, H, W]` with the head outputs; full size.
     /// `guides` are the guide groups' features at full size (empty without edge stopping).
-    pub fn composite(colour: Tensor<4>, guides: Vec<(Tensor<4>, bool)>, heads: Vec<HeadOutput>, low_pass_swap: bool) -> Tensor<4> {
+    pub fn composite(colour: Tensor<4>, guides: Vec<GuideLevel>, heads: Vec<HeadOutput>, low_pass_swap: bool) -> Tensor<4> {
         let mut pyramid = vec![(colour, guides)];
         for _ in 1..heads.len() {
             let (c, g) = pyramid.last().unwrap();
-            let next = (box_down(c.clone()), g.iter().map(|(g, one)| (box_down(g.clone()), *one)).collect());
+            let next = (box_down(c.clone()), g.iter().map(GuideLevel::down).collect());
             pyramid.push(next);
         }
         let mut out: Option<Tensor<4>> = None;
         // The coarser level's guides, for the joint-bilateral upsampling into this one.
-        let mut coarse_guides: Option<Vec<(Tensor<4>, bool)>> = None;
+        let mut coarse_guides: Option<Vec<GuideLevel>> = None;
         for ((c, g), head) in pyramid.into_iter().zip(heads).rev() {
             let mut logits = head.logits;
             // Bounded so that exp stays finite; e^±12 spans any useful strength.
             let strength = head.guide_strength.map(|s| s.clamp(-12.0, 12.0).exp());
             if let Some(strength) = &strength {
                 let k = crate::kernel::filter_size(logits.dims()[1]);
-                for (i, (g, brighter_only)) in g.iter().enumerate() {
-                    logits = logits - tap_distances(g.clone(), k, *brighter_only) * strength.clone().narrow(1, i, 1);
+                for (i, g) in g.iter().enumerate() {
+                    logits = logits - tap_distances(g, k) * strength.clone().narrow(1, i, 1);
                 }
             }
             let f = apply_kernel_reflect(c, logits);
@@ -528,6 +593,9 @@ mod tests {
         for compositor in [ScaleCompositor::LowPassSwap, ScaleCompositor::ConvexBlend] {
             let guides = vec![GuideGroup::new(0, 3, 1.0, false).brighter_only(), GuideGroup::new(3, 2, 2.0, false)];
             gradients_match_finite_differences_for(tiny(5).with_compositor(compositor).with_guides(guides));
+            // Noise-normalised: the variance channel (4) is on the gradient path too.
+            let noisy = vec![GuideGroup::new(0, 3, 1.0, false).with_variance(4).with_init_log_strength(-1.0)];
+            gradients_match_finite_differences_for(tiny(5).with_compositor(compositor).with_guides(noisy));
         }
     }
 
@@ -699,6 +767,34 @@ mod tests {
                 assert!(worst < 1e-5, "edge-stopped box kernels moved the edge by {worst}");
             } else {
                 assert!(worst > 0.1, "plain box kernels should blur the edge ({worst})");
+            }
+        }
+    }
+
+    /// A noise-normalised colour guide at a fixed strength (e^0) keeps a step of 0.98 where the
+    /// variance of the mean is 1e-4 (σ = 0.01: a 98σ step) and blurs the same step where it is
+    /// 10 (σ ≈ 3.2: the noise explains it), so the same network is sharp on a converged input
+    /// and smooths a noisy one. Either assertion fails if the variance is ignored.
+    #[test]
+    fn noise_normalised_colour_guide_stops_only_at_steps_the_noise_cannot_explain() {
+        let d = cpu_device();
+        let cfg = tiny(4).with_guides(vec![GuideGroup::new(0, 3, 1.0, false).with_variance(3)]);
+        let side = |i: usize| (i % 16) < 7;
+        for (variance, expect_sharp) in [(1e-4, true), (10.0, false)] {
+            let x: Vec<f64> = (0..4 * 256).map(|i| if i / 256 == 3 { variance } else if side(i) { 0.02 } else { 1.0 }).collect();
+            let mut net = cfg.init(1, &d);
+            set_constant_heads(&mut net, &cfg, |s, n| {
+                let mut bias = vec![0.0f32; n];
+                if s + 1 < cfg.kernel_scales {
+                    bias[9] = -60.0; // α = 0
+                }
+                bias
+            });
+            let worst = largest_change(&net, &cfg, &x, 16);
+            if expect_sharp {
+                assert!(worst < 1e-5, "a 98σ step was blurred by {worst}");
+            } else {
+                assert!(worst > 0.1, "a step well inside the noise should be smoothed ({worst})");
             }
         }
     }
