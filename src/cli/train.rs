@@ -39,8 +39,9 @@ pub struct TrainArgs {
     /// Network sizes: default (multi-scale kernel-predicting U-Net columns), half (50 % of
     /// default's channels), swap (default with the patented low-band-swap compositor at five
     /// scales, opt-in), edge (default at five scales with edge-stopping kernels and
-    /// joint-bilateral upsampling), kpcn (the CPU-sized KPCN), paper-half (50 % of the paper's)
-    /// or paper.
+    /// joint-bilateral upsampling), edge-noise (edge with the colour's differences measured in
+    /// units of its noise), kpcn (the CPU-sized KPCN), paper-half (50 % of the paper's) or
+    /// paper.
     #[arg(long, default_value = "default")]
     pub preset: String,
     #[arg(long, default_value_t = 1)]

@@ -126,8 +126,11 @@ impl ModuleMapper for Load<'_> {
     }
 }
 
+/// Tensors by name: shape and values.
+pub type NamedTensors = HashMap<String, (Vec<usize>, Vec<f32>)>;
+
 /// Reads a weights file: tensors by name and the metadata.
-pub fn read_weights(path: &Path) -> Result<(HashMap<String, (Vec<usize>, Vec<f32>)>, BTreeMap<String, String>), TrainError> {
+pub fn read_weights(path: &Path) -> Result<(NamedTensors, BTreeMap<String, String>), TrainError> {
     let bytes = std::fs::read(path).map_err(|e| io(path, e))?;
     let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes).map_err(|e| io(path, e))?;
     let st = safetensors::SafeTensors::deserialize(&bytes).map_err(|e| io(path, e))?;

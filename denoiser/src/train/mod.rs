@@ -431,7 +431,7 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
             // its best validated weights, so otherwise every step since the last validation
             // would be thrown away.
             let out_of_time = deadline.is_some_and(|d| elapsed(&started) >= d);
-            if st.step % val_every == 0 || st.step == stage.steps || out_of_time {
+            if st.step.is_multiple_of(val_every) || st.step == stage.steps || out_of_time {
                 if let Some(v) = validate(&model, data, opts) {
                     let best = st.best_val.is_none_or(|b| v < b);
                     if best {
@@ -456,7 +456,7 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
                 reason = "time budget";
                 break;
             }
-            if opts.checkpoint_every > 0 && st.step % opts.checkpoint_every == 0 && st.step < stage.steps {
+            if opts.checkpoint_every > 0 && st.step.is_multiple_of(opts.checkpoint_every) && st.step < stage.steps {
                 if let Some(c) = &ckpt {
                     st.elapsed = elapsed(&started);
                     save_checkpoint(c, &model, &optim, &mut st, &opts.metadata)?;

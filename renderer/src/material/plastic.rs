@@ -137,7 +137,9 @@ fn tables(dist: Distribution) -> &'static Tables {
 fn mitsuba_internal_reflectance(eta: f32, alpha: f32, dist: Distribution) -> f32 {
     use std::collections::HashMap;
     use std::sync::RwLock;
-    static CACHE: OnceLock<RwLock<HashMap<(u32, u32, bool), f32>>> = OnceLock::new();
+    /// (η bits, α bits, Beckmann?) → the hemispherical average.
+    type Key = (u32, u32, bool);
+    static CACHE: OnceLock<RwLock<HashMap<Key, f32>>> = OnceLock::new();
     let cache = CACHE.get_or_init(|| RwLock::new(HashMap::new()));
     let key = (eta.to_bits(), alpha.to_bits(), dist == Distribution::Beckmann);
     if let Some(&v) = cache.read().unwrap_or_else(|e| e.into_inner()).get(&key) {
