@@ -429,22 +429,35 @@ fn coarse_windows(x: Tensor<4>, fh: usize, fw: usize) -> Tensor<4> {
     fit_to(rep, fh, fw).reshape([b, c, 9, fh * fw])
 }
 
+/// Log-weight of the fine level's own value among the coarse taps of [`joint_upsample`]: e^−6
+/// ≈ 0.25 % beside unpenalised bilinear weights (which sum to 1), all of it where every coarse
+/// tap is cut.
+const UPSAMPLE_FALLBACK_LOG_WEIGHT: f32 = -6.0;
+
 /// Joint-bilateral 2× upsampling (Kopf et al. 2007) of `coarse` `[B, 3, h, w]` to `fh`×`fw`:
 /// each fine pixel p averages its 3×3 coarse neighbours q with the bilinear weights times
 /// exp(−Σ_g s_g(p)·‖g(q) − g(p)‖²), renormalised, where g(q) are the coarse level's guides and
 /// g(p) this level's. Plain bilinear upsampling carried a quarter of a bright coarse pixel across
 /// every silhouette into the convex blend (docs/denoiser.md, "Error floors").
-fn joint_upsample(coarse: Tensor<4>, coarse_guides: &[GuideLevel], fine_guides: &[GuideLevel], strength: Tensor<4>, fh: usize, fw: usize) -> Tensor<4> {
+///
+/// A tenth tap holds `fallback` (the fine level's own filtered value) at a small fixed weight:
+/// a small feature (a 3×3 shadow, a thin edge) has no coarse pixel of its own, so every coarse tap
+/// is cut and the softmax would otherwise hand the pixel to the least different one, however far
+/// (a shadow filled with the sunlit wall around it, docs/denoiser.md).
+fn joint_upsample(coarse: Tensor<4>, fallback: Tensor<4>, coarse_guides: &[GuideLevel], fine_guides: &[GuideLevel], strength: Tensor<4>, fh: usize, fw: usize) -> Tensor<4> {
     let [b, c, h, w] = coarse.dims();
-    let mut logits = fit_to(bilinear_tap_logits(h, w, &coarse.device()), fh, fw).reshape([1, 9, fh * fw]);
+    let n = fh * fw;
+    let mut logits = fit_to(bilinear_tap_logits(h, w, &coarse.device()), fh, fw).reshape([1, 9, n]).repeat_dim(0, b);
     for (i, (cg, fg)) in coarse_guides.iter().zip(fine_guides).enumerate() {
         let gc = fg.x.dims()[1];
-        let var = cg.var.as_ref().zip(fg.var.as_ref()).map(|(cv, fv)| (coarse_windows(cv.clone(), fh, fw), fv.clone().reshape([b, 1, 1, fh * fw])));
-        let d = guide_distance(coarse_windows(cg.x.clone(), fh, fw), fg.x.clone().reshape([b, gc, 1, fh * fw]), var, fg.brighter_only);
-        logits = logits - d * strength.clone().narrow(1, i, 1).reshape([b, 1, fh * fw]);
+        let var = cg.var.as_ref().zip(fg.var.as_ref()).map(|(cv, fv)| (coarse_windows(cv.clone(), fh, fw), fv.clone().reshape([b, 1, 1, n])));
+        let d = guide_distance(coarse_windows(cg.x.clone(), fh, fw), fg.x.clone().reshape([b, gc, 1, n]), var, fg.brighter_only);
+        logits = logits - d * strength.clone().narrow(1, i, 1).reshape([b, 1, n]);
     }
-    let wts = softmax(logits, 1).reshape([b, 1, 9, fh * fw]);
-    (coarse_windows(coarse, fh, fw) * wts).sum_dim(2).reshape([b, c, fh, fw])
+    let own = Tensor::<3>::full([b, 1, n], UPSAMPLE_FALLBACK_LOG_WEIGHT, &coarse.device());
+    let wts = softmax(Tensor::cat(vec![logits, own], 1), 1).reshape([b, 1, 10, n]);
+    let taps = Tensor::cat(vec![coarse_windows(coarse, fh, fw), fallback.reshape([b, c, 1, n])], 2);
+    (taps * wts).sum_dim(2).reshape([b, c, fh, fw])
 }
 
 impl MsKpNet {
@@ -521,8 +534,9 @@ impl MsKpNet {
                 }
             }
             let f = apply_kernel_reflect(c, logits);
+            let own = f.clone();
             let up = |x: Tensor<4>, h: usize, w: usize| match (&strength, &coarse_guides) {
-                (Some(s), Some(cg)) => joint_upsample(x, cg, &g, s.clone(), h, w),
+                (Some(s), Some(cg)) => joint_upsample(x, own.clone(), cg, &g, s.clone(), h, w),
                 _ => upsample_to(x, h, w),
             };
             out = Some(match (out, head.alpha) {
@@ -769,6 +783,31 @@ mod tests {
                 assert!(worst > 0.1, "plain box kernels should blur the edge ({worst})");
             }
         }
+    }
+
+    /// A feature smaller than a coarse pixel (one dark pixel, marked by the guide) has no coarse
+    /// tap of its own: with α = 1 and identity kernels, every coarse tap of its upsampling is cut,
+    /// and it must come back as itself (the fine level's own value) rather than as the least
+    /// different coarse pixel (0.755, its block's mean). Everything else is constant, so the
+    /// whole output must equal the input.
+    #[test]
+    fn a_feature_smaller_than_a_coarse_pixel_survives_the_convex_blend() {
+        let d = cpu_device();
+        let cfg = tiny(4).with_compositor(ScaleCompositor::ConvexBlend).with_guides(vec![GuideGroup::new(3, 1, 1.0, false)]);
+        let dark = 7 * 16 + 9;
+        let x: Vec<f64> = (0..4 * 256).map(|i| if i / 256 == 3 { f64::from(u8::from(i % 256 == dark)) } else if i % 256 == dark { 0.02 } else { 1.0 }).collect();
+        let mut net = cfg.init(1, &d);
+        set_constant_heads(&mut net, &cfg, |s, n| {
+            let mut bias = vec![-60.0f32; n];
+            bias[4] = 60.0; // identity kernel
+            if s + 1 < cfg.kernel_scales {
+                bias[9] = 60.0; // α = 1
+            }
+            bias[n - 1] = 12.0;
+            bias
+        });
+        let worst = largest_change(&net, &cfg, &x, 16);
+        assert!(worst < 1e-4, "the dark pixel changed by {worst}");
     }
 
     /// A noise-normalised colour guide at a fixed strength (e^0) keeps a step of 0.98 where the
