@@ -177,10 +177,16 @@ fn edge_guides(v: Variant, stopping: EdgeStopping) -> Vec<GuideGroup> {
     let colour = match stopping {
         EdgeStopping::FeaturesAndColour => Some(GuideGroup::new(0, 3, 1.0, true).brighter_only()),
         // Channel 3 is the variance of the colour's mean in the colour's own units
-        // (preprocess.rs). e^−3: a jump of 3σ in every channel keeps ~30 % of a tap's weight,
-        // one of 10σ none, so the guide acts from the first step instead of waiting for the
-        // strength to grow from e^−6.
-        EdgeStopping::FeaturesAndNoisyColour => Some(GuideGroup::new(0, 3, 1.0, false).with_variance(3).with_init_log_strength(-3.0)),
+        // (preprocess.rs). Two guides: by the pixel's own variance (sharp where it is reliable,
+        // at high spp) and by the pooled one (reliable at 2 spp, where most pixels report 0;
+        // mskp::pooled_variance). The pooled one starts at e^−3, where a jump of 3σ in every
+        // channel keeps ~30 % of a tap's weight and one of 10σ none, so it acts from the first
+        // step; the own one at e^−5, to be raised where the network finds it reliable.
+        EdgeStopping::FeaturesAndNoisyColour => {
+            let own = GuideGroup::new(0, 3, 1.0, false).with_variance(3).with_init_log_strength(-5.0);
+            let pooled = GuideGroup::new(0, 3, 1.0, false).with_pooled_variance(3).with_init_log_strength(-3.0);
+            return [own, pooled].into_iter().chain(edge_guides(v, EdgeStopping::Features)).collect();
+        }
         EdgeStopping::Features | EdgeStopping::Off => None,
     };
     let g = COLOUR_BLOCK;
