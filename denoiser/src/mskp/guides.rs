@@ -1,0 +1,238 @@
+//! Edge-stopping guides of the multi-scale column (docs/method.md §12): which input channels a
+//! kernel stops at ([`GuideGroup`]), the distance between a tap and the centre (plain, brighter
+//! only, or in units of the noise), and the joint-bilateral upsampling of the coarse levels.
+
+use burn::tensor::activation::softmax;
+use burn::tensor::module::{avg_pool2d, interpolate, unfold4d};
+use burn::tensor::ops::{AvgPoolOptions, InterpolateMode, InterpolateOptions, PadMode, UnfoldOptions};
+use burn::tensor::{Device, Tensor};
+
+use super::{box_down, pad_reflect};
+
+/// The edge-stopping guides of a preset (per variant: `DenoiserConfig::mskp_for`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum EdgeStopping {
+    /// Plain softmax kernels.
+    Off,
+    /// The column's auxiliary features: normal, depth and albedo (D_G), f_P (D_P).
+    Features,
+    /// Those plus the colour, brighter taps only.
+    FeaturesAndColour,
+    /// The features plus the colour, its differences measured in units of their own noise
+    /// (Rousselle et al. 2012): a difference the per-pixel variance explains costs nothing, so
+    /// noisy pixels still average, and as the variance falls with more samples every real
+    /// difference stops the kernel, which tends to the identity on a converged input.
+    FeaturesAndNoisyColour,
+}
+
+/// Input channels `start..start + len` used as an edge-stopping guide, multiplied by `scale`
+/// (after log(1 + max(c, 0)) when `log`) before distances are taken. A `brighter_only` guide
+/// counts only how much a tap exceeds the centre, Σ max(g(q) − g(p), 0)²: on the noisy colour a
+/// symmetric distance would keep every firefly (its neighbours all look far from it), while this
+/// one only stops light from flowing in from brighter taps, fireflies included.
+///
+/// A guide with a `variance` channel (the per-pixel variance of the mean of channels
+/// `start..start + len`, in their units) is noise-normalised: a tap's distance is
+/// Σ_c max((g_c(q) − g_c(p))² − (v_p + min(v_p, v_q)), 0) / (ε + v_p + v_q), the non-local-means
+/// distance of Rousselle et al. 2012 (docs/method.md §12): the subtraction removes what the noise
+/// alone adds to a squared difference, the division puts it in units of that noise. Its strength
+/// starts at `init_log_strength` (e^`GUIDE_STRENGTH_INIT` when `None`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GuideGroup {
+    pub start: usize,
+    pub len: usize,
+    pub scale: f64,
+    pub log: bool,
+    #[serde(default)]
+    pub brighter_only: bool,
+    #[serde(default)]
+    pub variance: Option<usize>,
+    #[serde(default)]
+    pub init_log_strength: Option<f32>,
+    /// Normalise by [`pooled_variance`] instead of the pixel's own variance.
+    #[serde(default)]
+    pub pooled_variance: bool,
+}
+
+impl GuideGroup {
+    pub fn new(start: usize, len: usize, scale: f64, log: bool) -> Self {
+        GuideGroup { start, len, scale, log, brighter_only: false, variance: None, init_log_strength: None, pooled_variance: false }
+    }
+
+    pub fn brighter_only(self) -> Self {
+        GuideGroup { brighter_only: true, ..self }
+    }
+
+    /// Noise-normalised distances, with the variance of the mean in input channel `channel`.
+    pub fn with_variance(self, channel: usize) -> Self {
+        GuideGroup { variance: Some(channel), ..self }
+    }
+
+    /// Noise-normalised by the variance pooled over a window ([`pooled_variance`]).
+    pub fn with_pooled_variance(self, channel: usize) -> Self {
+        GuideGroup { variance: Some(channel), pooled_variance: true, ..self }
+    }
+
+    pub fn with_init_log_strength(self, s: f32) -> Self {
+        GuideGroup { init_log_strength: Some(s), ..self }
+    }
+}
+
+/// A guide group's features at one pyramid level, with the variance of their mean for a
+/// noise-normalised group.
+#[derive(Clone, Debug)]
+pub struct GuideLevel {
+    x: Tensor<4>,
+    var: Option<Tensor<4>>,
+    brighter_only: bool,
+}
+
+impl GuideLevel {
+    /// The next coarser level: 2×2 box means, whose variance is a quarter of the mean variance
+    /// (independent pixels).
+    pub(super) fn down(&self) -> Self {
+        GuideLevel { x: box_down(self.x.clone()), var: self.var.clone().map(|v| box_down(v).div_scalar(4.0)), brighter_only: self.brighter_only }
+    }
+}
+
+/// Keeps a noise-normalised distance finite where both variances are 0 (a pixel whose samples
+/// all agree); in the colour's units squared, far below any visible difference.
+const NOISE_EPS: f32 = 1e-4;
+
+/// Guide distances between taps q `[B, C, T, N]` (variances `[B, 1, T, N]`) and centres p
+/// `[B, C, 1, N]` (`[B, 1, 1, N]`) → `[B, T, N]`.
+fn guide_distance(q: Tensor<4>, p: Tensor<4>, var: Option<(Tensor<4>, Tensor<4>)>, brighter_only: bool) -> Tensor<3> {
+    let diff = q - p;
+    let diff = if brighter_only { diff.clamp_min(0.0) } else { diff };
+    let d2 = diff.square();
+    match var {
+        None => d2.sum_dim(1).squeeze_dim(1),
+        Some((vq, vp)) => {
+            let min = (vq.clone() + vp.clone() - (vq.clone() - vp.clone()).abs()).mul_scalar(0.5);
+            let excess = (d2 - (vp.clone() + min)).clamp_min(0.0);
+            (excess / (vq + vp).add_scalar(NOISE_EPS)).sum_dim(1).squeeze_dim(1)
+        }
+    }
+}
+
+/// The guide distance (Σ_c (g_c(q) − g_c(p))², only the positive differences if
+/// `brighter_only`, noise-normalised with a variance: [`GuideGroup`]) for every tap q of the k×k
+/// window around each pixel p: `[B, C, H, W]` → `[B, k², H, W]`, taps in the kernel map's order.
+pub fn tap_distances(g: &GuideLevel, k: usize) -> Tensor<4> {
+    let [b, c, h, w] = g.x.dims();
+    let windows = |x: &Tensor<4>| {
+        let c = x.dims()[1];
+        unfold4d(pad_reflect(x.clone(), k / 2), [k, k], UnfoldOptions::new([1, 1], [0, 0], [1, 1])).reshape([b, c, k * k, h * w])
+    };
+    let var = g.var.as_ref().map(|v| (windows(v), v.clone().reshape([b, 1, 1, h * w])));
+    guide_distance(windows(&g.x), g.x.clone().reshape([b, c, 1, h * w]), var, g.brighter_only).reshape([b, k * k, h, w])
+}
+
+/// Side of the window whose mean variance a pixel's own may not fall below (see
+/// [`pooled_variance`]).
+pub(super) const VARIANCE_POOL: usize = 5;
+
+/// max(v, mean of v over the 5×5 window): at 2 spp most pixels of a dim scene saw no light in
+/// either sample and report variance 0, and a distance normalised by that called every lit
+/// neighbour an edge, so black holes stayed black (veach-ajar 2 spp: 0.205 → 0.144 with the same
+/// weights). The window's mean is what the pixel's variance would be had its samples been as
+/// lucky as its neighbours'; the max keeps a firefly's own large variance. Next to a thin,
+/// noisy feature (wires at 64 spp) the pooled variance is too large and lets the feature leak,
+/// so the preset gives the network both distances, each with its own strength.
+pub(super) fn pooled_variance(v: Tensor<4>) -> Tensor<4> {
+    let r = VARIANCE_POOL / 2;
+    let mean = avg_pool2d(pad_reflect(v.clone(), r), AvgPoolOptions::new([VARIANCE_POOL, VARIANCE_POOL]).with_stride([1, 1]));
+    v.max_pair(mean)
+}
+
+/// The guide groups' features at full size, scaled (and log-compressed where asked), with their
+/// variances for noise-normalised groups (scaled alike, clamped at 0), in the group order.
+pub(super) fn guide_features(input: &Tensor<4>, guides: &[GuideGroup]) -> Vec<GuideLevel> {
+    guides
+        .iter()
+        .map(|g| {
+            let x = input.clone().narrow(1, g.start, g.len);
+            let x = if g.log { x.clamp_min(0.0).log1p() } else { x };
+            let var = g.variance.map(|v| {
+                let v = input.clone().narrow(1, v, 1).clamp_min(0.0);
+                let v = if g.pooled_variance { pooled_variance(v) } else { v };
+                v.mul_scalar(g.scale * g.scale)
+            });
+            GuideLevel { x: x.mul_scalar(g.scale), var, brighter_only: g.brighter_only }
+        })
+        .collect()
+}
+
+/// Log of the bilinear (align-corners-false) weights of the 3×3 coarse neighbours of each pixel
+/// of a 2h×2w grid, `[1, 9, 2h, 2w]`, taps in unfold order; −1e4 where a weight is 0.
+fn bilinear_tap_logits(h: usize, w: usize, device: &Device) -> Tensor<4> {
+    // A fine pixel in the upper (left) half of its parent takes ¼ of the coarse row (column)
+    // above (left), ¾ of its own and none of the one below (right); mirrored for the other half.
+    let one_d = |sub: usize| if sub == 0 { [0.25f32, 0.75, 0.0] } else { [0.0, 0.75, 0.25] };
+    let (fh, fw) = (2 * h, 2 * w);
+    let mut v = vec![0f32; 9 * fh * fw];
+    for y in 0..fh {
+        for x in 0..fw {
+            let (wy, wx) = (one_d(y % 2), one_d(x % 2));
+            for i in 0..3 {
+                for j in 0..3 {
+                    let wt = wy[i] * wx[j];
+                    v[((i * 3 + j) * fh + y) * fw + x] = if wt > 0.0 { wt.ln() } else { -1e4 };
+                }
+            }
+        }
+    }
+    Tensor::<1>::from_data(burn::tensor::TensorData::new(v, [9 * fh * fw]), device).reshape([1, 9, fh, fw])
+}
+
+/// Edge-pads (or crops) the bottom/right of `x` to `h`×`w`.
+fn fit_to(x: Tensor<4>, h: usize, w: usize) -> Tensor<4> {
+    let [_, _, xh, xw] = x.dims();
+    let x = x.narrow(2, 0, xh.min(h)).narrow(3, 0, xw.min(w));
+    let (py, px) = (h.saturating_sub(xh), w.saturating_sub(xw));
+    if py > 0 || px > 0 {
+        x.pad([(0, py), (0, px)], PadMode::Edge)
+    } else {
+        x
+    }
+}
+
+/// The 3×3 windows of `x` `[B, C, h, w]` (reflect-padded), repeated onto the 2×2 fine pixels of
+/// each coarse one and edge-padded to `[B, C, 9, fh·fw]` (fh ∈ {2h, 2h + 1}: pooling floors).
+fn coarse_windows(x: Tensor<4>, fh: usize, fw: usize) -> Tensor<4> {
+    let [b, c, h, w] = x.dims();
+    let cols = unfold4d(pad_reflect(x, 1), [3, 3], UnfoldOptions::new([1, 1], [0, 0], [1, 1])).reshape([b, c * 9, h, w]);
+    let rep = interpolate(cols, InterpolateOptions::new(InterpolateMode::Nearest).with_output_size([2 * h, 2 * w]));
+    fit_to(rep, fh, fw).reshape([b, c, 9, fh * fw])
+}
+
+/// Log-weight of the fine level's own value among the coarse taps of [`joint_upsample`]: e^−6
+/// ≈ 0.25 % beside unpenalised bilinear weights (which sum to 1), all of it where every coarse
+/// tap is cut.
+const UPSAMPLE_FALLBACK_LOG_WEIGHT: f32 = -6.0;
+
+/// Joint-bilateral 2× upsampling (Kopf et al. 2007) of `coarse` `[B, 3, h, w]` to `fh`×`fw`:
+/// each fine pixel p averages its 3×3 coarse neighbours q with the bilinear weights times
+/// exp(−Σ_g s_g(p)·‖g(q) − g(p)‖²), renormalised, where g(q) are the coarse level's guides and
+/// g(p) this level's. Plain bilinear upsampling carried a quarter of a bright coarse pixel across
+/// every silhouette into the convex blend (docs/denoiser.md, "Error floors").
+///
+/// A tenth tap holds `fallback` (the fine level's own filtered value) at a small fixed weight:
+/// a small feature (a 3×3 shadow, a thin edge) has no coarse pixel of its own, so every coarse tap
+/// is cut and the softmax would otherwise hand the pixel to the least different one, however far
+/// (a shadow filled with the sunlit wall around it, docs/denoiser.md).
+pub(super) fn joint_upsample(coarse: Tensor<4>, fallback: Tensor<4>, coarse_guides: &[GuideLevel], fine_guides: &[GuideLevel], strength: Tensor<4>, fh: usize, fw: usize) -> Tensor<4> {
+    let [b, c, h, w] = coarse.dims();
+    let n = fh * fw;
+    let mut logits = fit_to(bilinear_tap_logits(h, w, &coarse.device()), fh, fw).reshape([1, 9, n]).repeat_dim(0, b);
+    for (i, (cg, fg)) in coarse_guides.iter().zip(fine_guides).enumerate() {
+        let gc = fg.x.dims()[1];
+        let var = cg.var.as_ref().zip(fg.var.as_ref()).map(|(cv, fv)| (coarse_windows(cv.clone(), fh, fw), fv.clone().reshape([b, 1, 1, n])));
+        let d = guide_distance(coarse_windows(cg.x.clone(), fh, fw), fg.x.clone().reshape([b, gc, 1, n]), var, fg.brighter_only);
+        logits = logits - d * strength.clone().narrow(1, i, 1).reshape([b, 1, n]);
+    }
+    let own = Tensor::<3>::full([b, 1, n], UPSAMPLE_FALLBACK_LOG_WEIGHT, &coarse.device());
+    let wts = softmax(Tensor::cat(vec![logits, own], 1), 1).reshape([b, 1, 10, n]);
+    let taps = Tensor::cat(vec![coarse_windows(coarse, fh, fw), fallback.reshape([b, c, 1, n])], 2);
+    (taps * wts).sum_dim(2).reshape([b, c, fh, fw])
+}
