@@ -14,12 +14,14 @@ mod builder;
 pub mod gltf_format;
 pub mod image_io;
 pub mod mitsuba;
+mod mitsuba_export;
 pub mod obj;
 pub mod primitives;
 pub mod procedural;
 pub mod toml_format;
 
 pub use builder::{MAX_RESOLUTION_PIXELS, MAX_RESOLUTION_SIDE};
+pub use mitsuba_export::export_mitsuba;
 // Materials live in `crate::material` (the light structures use them too); scenes hold them.
 pub use crate::material::{ColorParam, Material, MaterialKind};
 
