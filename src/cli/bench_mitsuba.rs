@@ -42,6 +42,8 @@ struct MitsubaSide {
 /// One timed Mitsuba render.
 struct MitsubaRun {
     seconds: f64,
+    /// CPU time of the whole Mitsuba process during the render (all threads).
+    cpu_seconds: f64,
     /// Kernels Dr.Jit compiled during this run instead of taking them from its cache.
     compiled_kernels: u64,
     mean: [f64; 3],
@@ -126,7 +128,8 @@ impl Session {
         let v = self.next_message()?;
         let mean = v["mean"].as_array().map(|a| a.iter().map(|x| x.as_f64().unwrap_or(f64::NAN)).collect::<Vec<_>>()).unwrap_or_default();
         let seconds = v["seconds"].as_f64().ok_or_else(|| anyhow!("Mitsuba's bench.py: no `seconds` in {v}"))?;
-        Ok(MitsubaRun { seconds, compiled_kernels: v["compiled_kernels"].as_u64().unwrap_or(0), mean: [0, 1, 2].map(|c| mean.get(c).copied().unwrap_or(f64::NAN)) })
+        let cpu_seconds = v["cpu_seconds"].as_f64().unwrap_or(f64::NAN);
+        Ok(MitsubaRun { seconds, cpu_seconds, compiled_kernels: v["compiled_kernels"].as_u64().unwrap_or(0), mean: [0, 1, 2].map(|c| mean.get(c).copied().unwrap_or(f64::NAN)) })
     }
 }
 
@@ -136,6 +139,20 @@ impl Drop for Session {
         let _ = self.stdin.flush();
         let _ = self.child.wait();
     }
+}
+
+/// CPU time (user + system, all threads) this process has used, in seconds; `None` where
+/// /proc is unavailable. On a machine shared with other work, a render's CPU time counts only
+/// the time its threads actually ran, which wall time does not.
+fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the parenthesised command name, which may itself contain spaces.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    // utime and stime are fields 14 and 15 of the line, 11 and 12 after the name; /proc reports
+    // them in USER_HZ, which Linux fixes at 100 for user space.
+    let ticks = f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?;
+    Some(ticks as f64 / 100.0)
 }
 
 /// The Mitsuba XML for `scene_path`: the file itself if it is Mitsuba XML, else the scene as we
@@ -223,12 +240,18 @@ pub fn integrator_vs_mitsuba(scene_path: &Path, s: &Settings, mitsuba: bool) -> 
         }
     }
     let mut ours_best: Option<(f64, u64)> = None;
+    let mut ours_cpu = f64::INFINITY;
+    let mut theirs_cpu = f64::INFINITY;
     let mut ours_mean = [0.0f64; 3];
     let mut theirs_best: Option<MitsubaRun> = None;
     let mut compiled = 0u64;
     for run in 0..s.repeat.max(1) {
         let opts = RenderOptions { spp: s.spp, seed: run as u64, max_bounces: s.max_bounces, russian_roulette: false, request: BufferRequest::RADIANCE_ONLY, crop: None, first_sample: 0 };
+        let cpu0 = process_cpu_seconds();
         let (frame, st) = integrator::render(&scene, &opts, &|_| {})?;
+        if let (Some(a), Some(b)) = (cpu0, process_cpu_seconds()) {
+            ours_cpu = ours_cpu.min(b - a);
+        }
         let secs = st.wall.as_secs_f64();
         if ours_best.is_none_or(|(b, _)| secs < b) {
             ours_best = Some((secs, st.rays));
@@ -239,6 +262,9 @@ pub fn integrator_vs_mitsuba(scene_path: &Path, s: &Settings, mitsuba: bool) -> 
             match m.session.render(run + 1) {
                 Ok(r) => {
                     compiled += r.compiled_kernels;
+                    if r.cpu_seconds.is_finite() {
+                        theirs_cpu = theirs_cpu.min(r.cpu_seconds);
+                    }
                     if theirs_best.as_ref().is_none_or(|b| r.seconds < b.seconds) {
                         theirs_best = Some(r);
                     }
@@ -258,7 +284,15 @@ pub fn integrator_vs_mitsuba(scene_path: &Path, s: &Settings, mitsuba: bool) -> 
         let theirs = paths / t.seconds;
         let jit = if m.session.ready.variant.starts_with("llvm") { format!("; {compiled} kernels compiled during the timed runs") } else { String::new() };
         println!("  Mitsuba  {:>7.3} M paths/s ({:.2} s per render{jit})", theirs * 1e-6, t.seconds);
-        println!("  ours/Mitsuba {:.2}x ({})", ours / theirs, m.session.ready.variant);
+        println!("  ours/Mitsuba {:.2}x ({}, wall clock)", ours / theirs, m.session.ready.variant);
+        if ours_cpu.is_finite() && theirs_cpu.is_finite() && ours_cpu > 0.0 && theirs_cpu > 0.0 {
+            println!(
+                "  per CPU second (all threads of each process, best run): ours {:.3} M paths, Mitsuba {:.3} M paths; ours/Mitsuba {:.2}x",
+                paths / ours_cpu * 1e-6,
+                paths / theirs_cpu * 1e-6,
+                theirs_cpu / ours_cpu
+            );
+        }
         let rel = |a: f64, b: f64| 100.0 * (a - b) / b;
         println!(
             "  image mean RGB: ours {:.4} {:.4} {:.4}, Mitsuba {:.4} {:.4} {:.4} ({:+.2}% {:+.2}% {:+.2}%)",

@@ -14,8 +14,9 @@ Protocol, one JSON object per line on stdout:
   compilation of the kernels are done before any timed run:
   {"variant", "fallback_reason", "version", "threads", "warmup_seconds", "load_seconds"}
 - then for each line `render SEED` on stdin, one timed render:
-  {"seconds", "compiled_kernels", "mean"} where `seconds` is the wall time of `mi.render` until
-  the image is evaluated, `compiled_kernels` counts kernels Dr.Jit had to compile (rather than
+  {"seconds", "cpu_seconds", "compiled_kernels", "mean"} where `seconds` is the wall time of
+  `mi.render` until the image is evaluated, `cpu_seconds` the CPU time of the whole process (all
+  its threads) meanwhile, `compiled_kernels` counts kernels Dr.Jit had to compile (rather than
   take from its cache) during that render (0 means no JIT time was timed), and `mean` is the
   image's mean RGB (a check that both renderers saw the same scene);
 - EOF or `quit` ends the process.
@@ -72,19 +73,20 @@ def main():
     def render(seed):
         if jit:
             dr.kernel_history()  # clears the history: only this render's kernels are counted
-        start = time.perf_counter()
+        start, cpu_start = time.perf_counter(), time.process_time()
         img = mi.render(scene, integrator=integrator, spp=spp, seed=seed)
         dr.eval(img)
         dr.sync_thread()
         arr = img.numpy()
         seconds = time.perf_counter() - start
+        cpu_seconds = time.process_time() - cpu_start
         compiled = 0
         if jit:
             compiled = sum(1 for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT and not k.get("cache_hit", False))
         mean = [float(arr[:, :, c].mean()) for c in range(3)]
-        return seconds, compiled, mean
+        return seconds, cpu_seconds, compiled, mean
 
-    warmup, _, _ = render(0)
+    warmup, _, _, _ = render(0)
     emit({"variant": variant, "fallback_reason": reason, "version": mi.__version__, "threads": dr.thread_count(), "warmup_seconds": warmup, "load_seconds": load_seconds})
     for line in sys.stdin:
         words = line.split()
@@ -92,8 +94,8 @@ def main():
             break
         if words[0] != "render" or len(words) != 2:
             raise SystemExit(f"bench.py: unexpected command {line.strip()!r}")
-        seconds, compiled, mean = render(int(words[1]))
-        emit({"seconds": seconds, "compiled_kernels": compiled, "mean": mean})
+        seconds, cpu_seconds, compiled, mean = render(int(words[1]))
+        emit({"seconds": seconds, "cpu_seconds": cpu_seconds, "compiled_kernels": compiled, "mean": mean})
 
 
 if __name__ == "__main__":
