@@ -24,7 +24,7 @@ struct Args {
 enum Command {
     /// Render a scene (.toml, .gltf/.glb) to EXR, with an optional PNG preview.
     Render(cli::render::RenderArgs),
-    /// Measure BVH, integrator and buffer costs; prints ratios against baselines run in the same process.
+    /// Measure the integrator against Mitsuba 3, the BVH against Embree, and buffer costs; prints ratios against baselines run in the same process.
     Bench(cli::bench::BenchArgs),
     /// Write a procedural sky (Preetham + sun) environment map to EXR.
     Sky(cli::sky::SkyArgs),

@@ -20,11 +20,10 @@
 //! reused. Without it the test fails (as the Embree cross-check does; it is required in CI).
 //! Pictures (ours | Mitsuba | z) and the numbers go to target/mitsuba-crosscheck/.
 
-use glam::Vec3;
-use tools_venv::tools_venv;
 use renderer::film::BufferRequest;
 use renderer::integrator::{self, RenderOptions};
-use renderer::scene::{ColorParam, MaterialKind, Scene};
+use renderer::scene::{export_mitsuba, Scene};
+use tools_venv::{mitsuba_python, MITSUBA};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -35,7 +34,6 @@ use std::process::Command;
 const ALPHA: f64 = 1e-3;
 /// Mitsuba renders each scene this many times with different seeds.
 const SEEDS: u32 = 16;
-const MITSUBA: &str = "mitsuba==3.9.1";
 
 fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("renderer/ has a parent").to_path_buf()
@@ -115,80 +113,6 @@ fn write_image(img: &Image, path: &Path, spp: u32, seeds: u32) {
         b.extend_from_slice(&(*v as f32).to_le_bytes());
     }
     std::fs::write(path, b).unwrap();
-}
-
-/// Writes the scene as we loaded it as Mitsuba XML with one OBJ per material: the TOML Cornell
-/// box has no Mitsuba file of its own. Only what such scenes use: constant colours, area lights.
-fn export_mitsuba(scene: &Scene, dir: &Path) -> PathBuf {
-    std::fs::create_dir_all(dir).unwrap();
-    assert!(scene.lights.env_radiance(Vec3::Y) == Vec3::ZERO, "export: environments are not exported");
-    let c = &scene.camera;
-    let left = -c.right;
-    let m = [[left.x, c.up.x, c.forward.x, c.position.x], [left.y, c.up.y, c.forward.y, c.position.y], [left.z, c.up.z, c.forward.z, c.position.z]];
-    let axis = match c.fov_axis {
-        renderer::camera::FovAxis::X => "x",
-        renderer::camera::FovAxis::Y => "y",
-        renderer::camera::FovAxis::Diagonal => "diagonal",
-        renderer::camera::FovAxis::Smaller => "smaller",
-        renderer::camera::FovAxis::Larger => "larger",
-    };
-    let mut xml = String::from("<scene version=\"3.0.0\">\n");
-    let mat: Vec<String> = m.iter().flatten().map(|v| v.to_string()).chain(["0", "0", "0", "1"].map(String::from)).collect();
-    writeln!(
-        xml,
-        "  <sensor type=\"perspective\"><float name=\"fov\" value=\"{}\"/><string name=\"fov_axis\" value=\"{axis}\"/>\n    <transform name=\"to_world\"><matrix value=\"{}\"/></transform>\n    <film type=\"hdrfilm\"><integer name=\"width\" value=\"{}\"/><integer name=\"height\" value=\"{}\"/></film></sensor>",
-        2.0 * c.tan_half_fov.atan().to_degrees(),
-        mat.join(" "),
-        c.width,
-        c.height
-    )
-    .unwrap();
-    let rgb = |v: Vec3| format!("{}, {}, {}", v.x, v.y, v.z);
-    let mesh = &scene.mesh;
-    for (mi, material) in scene.materials.iter().enumerate() {
-        let tris: Vec<usize> = (0..mesh.triangles.len()).filter(|&t| mesh.material[t] as usize == mi).collect();
-        if tris.is_empty() {
-            continue;
-        }
-        let mut obj = String::new();
-        // Shading normals only on non-emitters: an emitter's front is its winding on both sides.
-        let normals = !mesh.normals.is_empty() && !material.is_emissive();
-        for &t in &tris {
-            for &v in &mesh.triangles[t] {
-                let p = mesh.positions[v as usize];
-                writeln!(obj, "v {} {} {}", p.x, p.y, p.z).unwrap();
-                if normals {
-                    let n = mesh.normals[v as usize];
-                    writeln!(obj, "vn {} {} {}", n.x, n.y, n.z).unwrap();
-                }
-            }
-        }
-        for k in 0..tris.len() {
-            let (a, b, c) = (3 * k + 1, 3 * k + 2, 3 * k + 3);
-            if normals {
-                writeln!(obj, "f {a}//{a} {b}//{b} {c}//{c}").unwrap();
-            } else {
-                writeln!(obj, "f {a} {b} {c}").unwrap();
-            }
-        }
-        let file = format!("material{mi}.obj");
-        std::fs::write(dir.join(&file), obj).unwrap();
-        let bsdf = match &material.kind {
-            MaterialKind::Lambert { albedo: ColorParam::Const(a) } => format!("<bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"{}\"/></bsdf>", rgb(*a)),
-            other => panic!("export: material {} ({other:?}) is not exported", material.name),
-        };
-        let emitter = if material.is_emissive() {
-            assert!(!material.two_sided_emission, "export: two-sided emission");
-            format!("<emitter type=\"area\"><rgb name=\"radiance\" value=\"{}\"/></emitter>", rgb(material.emission))
-        } else {
-            String::new()
-        };
-        writeln!(xml, "  <shape type=\"obj\"><string name=\"filename\" value=\"{file}\"/><bsdf type=\"twosided\">{bsdf}</bsdf>{emitter}</shape>").unwrap();
-    }
-    xml.push_str("</scene>\n");
-    let path = dir.join("scene.xml");
-    std::fs::write(&path, xml).unwrap();
-    path
 }
 
 // ---- Statistics -------------------------------------------------------------------------
@@ -374,7 +298,7 @@ fn check_case(python: &Path, case: &Case, out_dir: &Path) -> (String, Vec<String
             let mut scene = scene;
             scene.camera.width = case.width;
             scene.camera.height = case.height;
-            export_mitsuba(&scene, &out_dir.join(case.name))
+            export_mitsuba(&scene, &out_dir.join(case.name)).unwrap_or_else(|e| panic!("{}: {e}", case.name))
         }
     };
     let ours = render_ours(case);
@@ -492,8 +416,7 @@ fn cases() -> Vec<Case> {
 #[test]
 fn matches_mitsuba_pixel_by_pixel() {
     let venv = workspace().join("target/mitsuba-venv");
-    let probe = "import mitsuba as mi, numpy; mi.set_variant('scalar_rgb'); print(mi.__version__)";
-    let v = tools_venv(&venv, &[MITSUBA, "numpy"], probe).unwrap_or_else(|e| {
+    let v = mitsuba_python(&venv).unwrap_or_else(|e| {
         panic!("the Mitsuba cross-check needs python3 -m venv and `pip install {MITSUBA} numpy` (PyPI) to work: {e}")
     });
     println!("Mitsuba {} (scalar_rgb), family-wise alpha {ALPHA} per test and scene", v.probe);

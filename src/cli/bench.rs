@@ -2,6 +2,7 @@
 //! measured in the same process (docs/performance.md records the output).
 
 use crate::alloc_stats;
+use crate::cli::bench_mitsuba::{integrator_vs_mitsuba, Settings};
 use anyhow::Result;
 use clap::Args;
 use renderer::bench::{displaced_sphere, embree_script, ray_bench, EmbreeSetup, RayBatch, SphereStyle};
@@ -28,6 +29,21 @@ pub struct BenchArgs {
     /// Skip the Embree comparison (it needs a Python venv with embreex under target/).
     #[arg(long)]
     pub no_embree: bool,
+    /// Skip the Mitsuba 3 comparison of the integrator (it needs a Python venv with mitsuba
+    /// under target/, installed from PyPI on first use).
+    #[arg(long)]
+    pub no_mitsuba: bool,
+    /// Image size for the integrator measurement (ours and Mitsuba's), WIDTHxHEIGHT.
+    #[arg(long, default_value = "128x128", value_parser = crate::cli::bench_mitsuba::parse_size)]
+    pub integrator_size: (u32, u32),
+    /// Samples per pixel for the integrator measurement: enough that Mitsuba's per-render
+    /// overhead (tracing the integrator anew each call) is small next to its rendering.
+    #[arg(long, default_value_t = 1024)]
+    pub integrator_spp: u32,
+    /// Bounces for the integrator measurement (Mitsuba's max_depth is one more: it counts
+    /// path segments).
+    #[arg(long, default_value_t = 5)]
+    pub bounces: u32,
 }
 
 pub fn run(a: BenchArgs) -> Result<()> {
@@ -35,7 +51,8 @@ pub fn run(a: BenchArgs) -> Result<()> {
     let threads = rayon::current_num_threads();
     println!("machine: {threads} threads");
     buffer_overhead(&scene, &a)?;
-    integrator_throughput(&scene, &a)?;
+    let settings = Settings { width: a.integrator_size.0, height: a.integrator_size.1, spp: a.integrator_spp, max_bounces: a.bounces, repeat: a.repeat, threads };
+    integrator_vs_mitsuba(&a.scene, &settings, !a.no_mitsuba)?;
     rays(&scene, &a, threads)?;
     Ok(())
 }
@@ -66,15 +83,6 @@ fn buffer_overhead(scene: &Scene, a: &BenchArgs) -> Result<()> {
         let b = *base.get_or_insert(best);
         println!("{:<22} {:>10.3} {:>7.2}x {:>16.1}", name, best, best / b, peak as f64 / (1 << 20) as f64);
     }
-    Ok(())
-}
-
-/// Full-integrator paths/s (camera samples per second) on the scene.
-fn integrator_throughput(scene: &Scene, a: &BenchArgs) -> Result<()> {
-    let mut opts = RenderOptions::from_scene(scene, BufferRequest::RADIANCE_ONLY);
-    opts.spp = a.spp;
-    let (_, st) = integrator::render(scene, &opts, &|_| {})?;
-    println!("\nintegrator: {} — {:.3} M paths/s, {:.3} M rays/s", a.scene.display(), st.samples as f64 / st.wall.as_secs_f64() / 1e6, st.rays as f64 / st.wall.as_secs_f64() / 1e6);
     Ok(())
 }
 

@@ -2,6 +2,7 @@ pub mod progress;
 pub mod render;
 pub mod font;
 pub mod bench;
+pub mod bench_mitsuba;
 pub mod sky;
 pub mod dataset;
 pub mod reference;

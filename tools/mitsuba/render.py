@@ -30,8 +30,6 @@ import xml.etree.ElementTree as ET
 import mitsuba as mi
 import numpy as np
 
-mi.set_variant("scalar_rgb")
-
 
 def prepared_xml(path, width, height, spp):
     tree = ET.parse(path)
@@ -82,6 +80,8 @@ def main():
     path, out = sys.argv[1], sys.argv[2]
     width, height, spp, seeds, max_depth = (int(a) for a in sys.argv[3:8])
     exr = sys.argv[8] if len(sys.argv) == 9 else None
+    # Set here, not at import: bench.py imports prepared_xml and picks its own variant.
+    mi.set_variant("scalar_rgb")
     text, base = prepared_xml(path, width, height, spp)
     mi.file_resolver().prepend(base)
     scene = mi.load_string(text)

@@ -15,6 +15,8 @@ pub(crate) struct TriangleLight {
     pub area: f32,
     pub emission: Vec3,
     pub two_sided: bool,
+    /// The triangle's `Mesh::geometric_normal`, kept here because every light sample needs it.
+    pub normal: Vec3,
 }
 
 impl TriangleLight {

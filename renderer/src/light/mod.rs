@@ -76,10 +76,11 @@ impl Lights {
                 continue;
             }
             let area = mesh.area(i);
-            let light = TriangleLight { prim: i as u32, area, emission: mat.emission, two_sided: mat.two_sided_emission };
+            let normal = mesh.geometric_normal(i);
+            let light = TriangleLight { prim: i as u32, area, emission: mat.emission, two_sided: mat.two_sided_emission, normal };
             let power = light.power();
             // Zero-area triangles can never be sampled; non-finite emission has no meaningful pdf.
-            if !(area > 0.0) || mesh.geometric_normal(i) == Vec3::ZERO || !(power > 0.0) || !power.is_finite() {
+            if !(area > 0.0) || normal == Vec3::ZERO || !(power > 0.0) || !power.is_finite() {
                 continue;
             }
             prim_to_light[i] = triangles.len() as u32;
@@ -142,8 +143,7 @@ impl Lights {
         let [p0, p1, p2] = mesh.triangle(light.prim as usize);
         let b = crate::sampling::square_to_triangle(u);
         let p_light = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
-        let n_light = mesh.geometric_normal(light.prim as usize);
-        let (wi, dist, pdf) = light.connect(p, p_light, n_light, pmf)?;
+        let (wi, dist, pdf) = light.connect(p, p_light, light.normal, pmf)?;
         Some(LightSample { wi, dist, radiance: light.emission, pdf, prim: Some(light.prim) })
     }
 

@@ -14,12 +14,14 @@ mod builder;
 pub mod gltf_format;
 pub mod image_io;
 pub mod mitsuba;
+mod mitsuba_export;
 pub mod obj;
 pub mod primitives;
 pub mod procedural;
 pub mod toml_format;
 
 pub use builder::{MAX_RESOLUTION_PIXELS, MAX_RESOLUTION_SIDE};
+pub use mitsuba_export::export_mitsuba;
 // Materials live in `crate::material` (the light structures use them too); scenes hold them.
 pub use crate::material::{ColorParam, Material, MaterialKind};
 
@@ -63,6 +65,9 @@ pub struct Scene {
     pub lights: Lights,
     /// Largest extent of the mesh bounds (depth normalisation, method.md §1.1).
     pub radius: f32,
+    /// `mesh.geometric_normal(i)` of every triangle, computed once: every hit needs it, and
+    /// recomputing it (cross product, square root, vertex-normal vote) was 5% of render time.
+    geometric_normals: Vec<Vec3>,
 }
 
 /// Geometry at a ray hit.
@@ -96,7 +101,8 @@ impl Scene {
         let radius = (hi - lo).max_element().max(1e-6);
         let accel = Accel::build(&mesh);
         let lights = Lights::build(&mesh, &materials, environment);
-        Ok(Scene { source, camera, settings, mesh, materials, textures, accel, lights, radius })
+        let geometric_normals = (0..mesh.triangles.len()).map(|i| mesh.geometric_normal(i)).collect();
+        Ok(Scene { source, camera, settings, mesh, materials, textures, accel, lights, radius, geometric_normals })
     }
 
     /// Loads a scene file, choosing the loader by extension (.toml, .gltf/.glb, .xml).
@@ -128,7 +134,7 @@ impl Scene {
         // Barycentric interpolation is more precise than ray.at(t) far from the origin.
         let p = m.positions[a] * b0 + m.positions[b] * b1 + m.positions[c] * b2;
         let p = if p.is_finite() { p } else { ray.at(hit.t) };
-        let ng = m.geometric_normal(i);
+        let ng = self.geometric_normals[i];
         let ns = if m.normals.is_empty() {
             ng
         } else {

@@ -1,6 +1,6 @@
 //! Python venvs holding the tools pixguide borrows: Embree's Python binding (the BVH
-//! cross-check test and `pixguide bench`) and Open Image Denoise's library (the `oidn`
-//! baseline). A venv is built with `python3 -m venv` and pip the first time it is needed and
+//! cross-check test and `pixguide bench`), Mitsuba 3 (the image cross-check test and `pixguide
+//! bench`'s integrator comparison) and Open Image Denoise's library (the `oidn` baseline). A venv is built with `python3 -m venv` and pip the first time it is needed and
 //! reused afterwards.
 //!
 //! This is the only code that creates venvs or runs pip. It is its own small crate so that the
@@ -37,6 +37,60 @@ pub struct ToolsVenv {
 /// creating the venv (python3 -m venv; pip install embreex numpy) if it does not work yet.
 pub fn embree_python(venv: &Path) -> Result<PathBuf> {
     tools_venv(venv, &["embreex", "numpy"], "import embreex.rtcore_scene, numpy").map(|v| v.python)
+}
+
+/// The Mitsuba 3 release both the cross-check and the benchmark install: pinned, because the
+/// cross-check's documented agreement and the benchmark's recorded figures are for this one.
+pub const MITSUBA: &str = "mitsuba==3.9.1";
+
+/// The venv at `venv` with Mitsuba 3 (`MITSUBA`) and numpy; `probe` of the result is Mitsuba's
+/// version.
+pub fn mitsuba_python(venv: &Path) -> Result<ToolsVenv> {
+    tools_venv(venv, &[MITSUBA, "numpy"], "import mitsuba as mi, numpy; mi.set_variant('scalar_rgb'); print(mi.__version__)")
+}
+
+/// A libLLVM shared library for Dr.Jit's LLVM backend (Mitsuba's `llvm_*` variants), to pass as
+/// `DRJIT_LIBLLVM_PATH`: the variable itself if it is set, else the newest versioned
+/// `libLLVM*.so*` in the usual library folders. The newest, because Dr.Jit 1.5 emits
+/// intrinsics that old LLVMs cannot compile for every CPU (LLVM 15 aborts on `fminimum` on an
+/// AVX-512 machine) while Dr.Jit's own search takes the first it finds.
+pub fn libllvm_for_drjit() -> Option<PathBuf> {
+    if let Some(p) = std::env::var_os("DRJIT_LIBLLVM_PATH").filter(|p| !p.is_empty()) {
+        return Some(PathBuf::from(p));
+    }
+    let mut dirs: Vec<PathBuf> = ["/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib64", "/usr/lib", "/usr/local/lib", "/opt/homebrew/opt/llvm/lib", "/usr/local/opt/llvm/lib"].iter().map(PathBuf::from).collect();
+    // Debian/Ubuntu's per-version trees (/usr/lib/llvm-19/lib), Fedora's (/usr/lib64/llvm19/lib).
+    for parent in ["/usr/lib", "/usr/lib64"] {
+        if let Ok(rd) = std::fs::read_dir(parent) {
+            dirs.extend(rd.flatten().filter(|e| e.file_name().to_string_lossy().starts_with("llvm")).map(|e| e.path().join("lib")));
+        }
+    }
+    let mut best: Option<(u32, PathBuf)> = None;
+    for dir in dirs {
+        let Ok(rd) = std::fs::read_dir(&dir) else { continue };
+        for e in rd.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let Some(major) = libllvm_major(&name) else { continue };
+            if best.as_ref().is_none_or(|(m, _)| major > *m) {
+                best = Some((major, e.path()));
+            }
+        }
+    }
+    best.map(|(_, p)| p)
+}
+
+/// The LLVM major version in a shared library's file name (`libLLVM-19.so`, `libLLVM.so.19.1`,
+/// `libLLVM-14.0.6.so.1`, `libLLVM.dylib` has none).
+fn libllvm_major(name: &str) -> Option<u32> {
+    let rest = name.strip_prefix("libLLVM")?;
+    if !(rest.contains(".so") || rest.ends_with(".dylib")) {
+        return None;
+    }
+    let digits = |s: &str| s.chars().take_while(char::is_ascii_digit).collect::<String>().parse().ok();
+    match rest.strip_prefix('-') {
+        Some(v) => digits(v),
+        None => rest.strip_prefix(".so.").and_then(digits),
+    }
 }
 
 /// The venv at `venv` in which the Python snippet `probe` runs successfully, built (`python3 -m
@@ -83,4 +137,20 @@ pub fn tools_venv(venv: &Path, packages: &[&str], probe: &str) -> Result<ToolsVe
 /// after pages of context that would drown a one-line message.
 fn last_line(stderr: &[u8]) -> String {
     String::from_utf8_lossy(stderr).lines().map(str::trim).rfind(|l| !l.is_empty()).unwrap_or("").to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::libllvm_major;
+
+    #[test]
+    fn llvm_versions_from_file_names() {
+        assert_eq!(libllvm_major("libLLVM-19.so"), Some(19));
+        assert_eq!(libllvm_major("libLLVM.so.19.1"), Some(19));
+        assert_eq!(libllvm_major("libLLVM-14.0.6.so.1"), Some(14));
+        assert_eq!(libllvm_major("libLLVM-15.so.1"), Some(15));
+        assert_eq!(libllvm_major("libLLVM.so"), None);
+        assert_eq!(libllvm_major("libLLVMSupport.a"), None);
+        assert_eq!(libllvm_major("libLTO.so.19"), None);
+    }
 }
