@@ -67,10 +67,13 @@ pub fn load_scene(path: &Path) -> Result<SceneDescription> {
 pub(crate) fn load(b: &mut Builder, path: &Path, transform: &Mat4, choice: &MaterialChoice, field: &str) -> Result<Option<GltfCamera>> {
     let bytes = std::fs::read(path).map_err(|e| Error::scene(&b.file, field, format!("cannot read glTF '{}': {e}", path.display())))?;
     let fail = |b: &Builder, msg: String| Error::scene(&b.file, field, format!("glTF '{}': {msg}", path.display()));
-    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| fail(b, format!("{e}")))?;
+    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| fail(b, format!("{e}")))?;
+    let root = document.into_json();
+    check_position_accessors(&root).map_err(|m| fail(b, m))?;
+    let document = gltf::Document::from_json(root).map_err(|e| fail(b, format!("{e}")))?;
     let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
-    let mut blob = gltf.blob.clone();
-    let doc = &gltf.document;
+    let mut blob = blob;
+    let doc = &document;
     let mut buffers: Vec<Vec<u8>> = Vec::new();
     for buffer in doc.buffers() {
         let data = match buffer.source() {
@@ -304,6 +307,22 @@ fn read_primitive(prim: &gltf::Primitive, buffers: &[Vec<u8>], uv_set: u32) -> s
     Ok(Some(TriMesh { positions, normals, uvs, triangles }))
 }
 
+/// gltf-json 1.4's validation reads `accessors[i]` for every primitive's POSITION attribute
+/// before checking that `i` exists, and panics on a file where it does not; this check runs first.
+fn check_position_accessors(root: &gltf::json::Root) -> std::result::Result<(), String> {
+    let semantic = gltf::json::validation::Checked::Valid(gltf::json::mesh::Semantic::Positions);
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            if let Some(i) = prim.attributes.get(&semantic) {
+                if i.value() >= root.accessors.len() {
+                    return Err(format!("meshes[{m}].primitives[{p}].attributes.POSITION: accessor {} does not exist ({} accessors)", i.value(), root.accessors.len()));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Bytes of a buffer or image URI: a base64 `data:` URI or a path relative to `dir`.
 fn read_uri(uri: &str, dir: &Path) -> std::result::Result<Vec<u8>, String> {
     if let Some(rest) = uri.strip_prefix("data:") {
@@ -374,6 +393,19 @@ mod tests {
         assert_eq!(base64_decode("aGVsbG8gd29ybGQ").unwrap(), b"hello world");
         assert_eq!(base64_decode("AAEC/w==").unwrap(), vec![0, 1, 2, 255]);
         assert!(base64_decode("a*b").is_none());
+    }
+
+    /// Found by renderer/tests/fuzz_scenes.rs: gltf-json's own validation panicked here.
+    #[test]
+    fn position_accessor_out_of_range_is_an_error_not_a_panic() {
+        let dir = std::env::temp_dir().join(format!("pixguide-gltf-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("bad-position.gltf");
+        let json = r#"{"asset": {"version": "2.0"}, "meshes": [{"primitives": [{"attributes": {"POSITION": 65536}}]}]}"#;
+        std::fs::write(&p, json).unwrap();
+        let e = load_scene(&p).err().expect("an error").to_string();
+        std::fs::remove_dir_all(&dir).ok();
+        assert!(e.contains("bad-position.gltf") && e.contains("meshes[0].primitives[0].attributes.POSITION") && e.contains("65536"), "{e}");
     }
 
     #[test]
