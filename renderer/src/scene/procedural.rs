@@ -20,6 +20,10 @@ pub const CREASE_DEG: f32 = 30.0;
 /// asking for billions of triangles).
 pub const MAX_HEIGHTFIELD_SIDE: u32 = 2048;
 pub const MAX_GRID_COPIES: u32 = 100_000;
+/// Largest triangle count of one lathe or grid, about that of the finest sphere (4096 segments):
+/// the copy and segment limits alone still allow a grid of 10⁵ fine spheres (10¹² triangles) or
+/// a lathe of a long profile at 4096 segments.
+pub const MAX_SHAPE_TRIANGLES: u64 = 1 << 24;
 
 /// A surface of revolution of `profile` ((r, y) points, r ≥ 0) about +Y with `segments` slices.
 /// Traverse the profile so that the surface lies on your right walking up/outward: the normal of
@@ -40,6 +44,10 @@ pub fn lathe(profile: &[[f32; 2]], segments: u32) -> Result<TriMesh, String> {
         if p[0] < 0.0 {
             return Err(format!("point {i} has a negative radius {}", p[0]));
         }
+    }
+    let triangles = (profile.len() as u64 - 1) * segments as u64 * 2;
+    if triangles > MAX_SHAPE_TRIANGLES {
+        return Err(format!("{} points at {segments} segments make {triangles} triangles (at most {MAX_SHAPE_TRIANGLES})", profile.len()));
     }
     let pts: Vec<Vec2> = profile.iter().map(|p| Vec2::new(p[0], p[1])).collect();
     let mut seg_normals = Vec::new();
@@ -227,6 +235,10 @@ pub fn grid(element: GridElement, count: [u32; 3], spacing: Vec3, element_scale:
         GridElement::Sphere => sphere(1.0, segments),
     }
     .transformed(&Mat4::from_scale(element_scale));
+    let triangles = copies * base.triangles.len() as u64;
+    if triangles > MAX_SHAPE_TRIANGLES {
+        return Err(format!("count {count:?} of {} triangles each makes {triangles} triangles (at most {MAX_SHAPE_TRIANGLES})", base.triangles.len()));
+    }
     let mut out = TriMesh::default();
     let c = Vec3::new(count[0] as f32 - 1.0, count[1] as f32 - 1.0, count[2] as f32 - 1.0) * 0.5;
     for k in 0..count[2] {
@@ -342,6 +354,20 @@ mod tests {
         assert!(lathe(&[[0.0, 0.0], [0.0, 1.0]], 8).unwrap_err().contains("on the axis"));
         assert!(lathe(&[[1.0, f32::NAN], [1.0, 1.0]], 8).unwrap_err().contains("finite"));
         assert!(lathe(&[[1.0, 0.0], [1.0, 1.0]], 2).unwrap_err().contains("segments"));
+    }
+
+    /// Each parameter within its own limit, together billions of triangles: refused before
+    /// anything is allocated (without the limit, this grid of spheres would build 4·10⁸ triangles,
+    /// tens of GB).
+    #[test]
+    fn shapes_beyond_the_triangle_limit_are_refused() {
+        let e = grid(GridElement::Sphere, [100_000, 1, 1], Vec3::splat(2.5), Vec3::ONE, 64).unwrap_err();
+        assert!(e.contains("count [100000, 1, 1]") && e.contains("at most 16777216"), "{e}");
+        let profile: Vec<[f32; 2]> = (0..3000).map(|i| [1.0, i as f32]).collect();
+        let e = lathe(&profile, 4096).unwrap_err();
+        assert!(e.contains("3000 points") && e.contains("at most 16777216"), "{e}");
+        // As many copies of a cube (1.2·10⁶ triangles) are fine.
+        assert!(grid(GridElement::Cube, [100_000, 1, 1], Vec3::splat(2.5), Vec3::ONE, 64).is_ok());
     }
 
     #[test]
