@@ -70,6 +70,7 @@ pub fn write_frame(frame: &Frame, path: &Path) -> Result<()> {
 /// Reads a frame written by [`write_frame`] (or any EXR with at least `R,G,B`). Layers that are
 /// absent come back as `None`; a missing variance channel reads as zeros.
 pub fn read_frame(path: &Path) -> Result<Frame> {
+    check_frame_size(path)?;
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
@@ -125,6 +126,24 @@ pub fn read_frame(path: &Path) -> Result<Frame> {
     })
 }
 
+/// Refuses a file whose header claims a frame larger than a render can be, before the exr
+/// crate allocates every channel at that size (its own limit is 2³⁰ per side, so a corrupt
+/// header of a few bytes could ask for terabytes).
+fn check_frame_size(path: &Path) -> Result<()> {
+    use crate::scene::{MAX_RESOLUTION_PIXELS, MAX_RESOLUTION_SIDE};
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| Error::image(path, e))?;
+    for (i, h) in meta.headers.iter().enumerate() {
+        let (w, hh) = (h.layer_size.0, h.layer_size.1);
+        if w > MAX_RESOLUTION_SIDE as usize || hh > MAX_RESOLUTION_SIDE as usize || (w as u64).saturating_mul(hh as u64) > MAX_RESOLUTION_PIXELS {
+            return Err(Error::image(
+                path,
+                format!("layer {i}: dataWindow of {w}×{hh} pixels is larger than any frame ({MAX_RESOLUTION_SIDE} per side, 2^26 pixels)"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Writes a linear RGB texture (e.g. an environment map) as a plain `R,G,B` f32 EXR.
 pub fn write_rgb(path: &Path, tex: &crate::texture::Texture) -> Result<()> {
     let (w, h) = (tex.width as usize, tex.height as usize);
@@ -134,4 +153,31 @@ pub fn write_rgb(path: &Path, tex: &crate::texture::Texture) -> Result<()> {
     let tmp = tmp_path(path);
     Image::from_layer(layer).write().to_file(&tmp).map_err(|e| Error::image(&tmp, e))?;
     std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Found by renderer/tests/fuzz_exr.rs: a 1×1 file whose dataWindow claims 100000×100000
+    /// pixels made the exr crate allocate 40 GB per channel (an abort, not even a panic).
+    #[test]
+    fn huge_data_window_is_an_error_before_any_allocation() {
+        let dir = std::env::temp_dir().join(format!("pixguide-exr-io-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("huge.exr");
+        let tex = crate::texture::Texture { width: 1, height: 1, texels: vec![glam::Vec3::ONE] };
+        write_rgb(&p, &tex).unwrap();
+        assert!(read_frame(&p).is_ok());
+        let mut bytes = std::fs::read(&p).unwrap();
+        let key = b"dataWindow\0box2i\0";
+        let at = bytes.windows(key.len()).position(|w| w == key).unwrap() + key.len() + 4;
+        // xMax and yMax of the box (xMin, yMin, xMax, yMax as little-endian i32).
+        bytes[at + 8..at + 12].copy_from_slice(&99_999i32.to_le_bytes());
+        bytes[at + 12..at + 16].copy_from_slice(&99_999i32.to_le_bytes());
+        std::fs::write(&p, bytes).unwrap();
+        let e = read_frame(&p).err().expect("an error").to_string();
+        std::fs::remove_dir_all(&dir).ok();
+        assert!(e.contains("huge.exr") && e.contains("dataWindow of 100000×100000"), "{e}");
+    }
 }
