@@ -40,6 +40,12 @@ impl EnsembleConfig {
         self.widths().windows(2).map(|p| conv_macs(p[0], p[1], self.conv_kernel)).sum()
     }
 
+    /// Convolution kernel weights (no biases): a lower bound on the parameter count, which a
+    /// weight file must hold. Every layer runs at full resolution, so it equals the MAC count.
+    pub fn kernel_weights(&self) -> u64 {
+        self.macs_per_pixel()
+    }
+
     /// Xavier-uniform as for KPCN (gain √2 hidden, 1 output), zero biases.
     pub fn init(&self, seed: u64, device: &Device) -> EnsembleNet {
         assert!(self.depth >= 1);

@@ -84,6 +84,12 @@ impl KpcnConfig {
         convs + (self.filter_size * self.filter_size * 3) as u64
     }
 
+    /// Convolution kernel weights (no biases): a lower bound on the parameter count, which a
+    /// weight file must hold.
+    pub fn kernel_weights(&self) -> u64 {
+        self.widths().windows(2).map(|p| conv_macs(p[0], p[1], self.conv_kernel)).sum()
+    }
+
     /// Xavier-uniform weights, gain √2 before a ReLU and 1 on the linear output; zero biases.
     pub fn init(&self, seed: u64, device: &Device) -> Column {
         assert!(self.depth >= 1 && self.in_channels >= 3, "KPCN needs ≥ 1 layer and a colour input");

@@ -66,6 +66,24 @@ impl PathNetConfig {
         per_sample * spp as u64 + unet as u64
     }
 
+    /// Convolution kernel weights (no biases or norm gains): a lower bound on the parameter
+    /// count, which a weight file must hold.
+    pub fn kernel_weights(&self) -> u64 {
+        let e = self.embed_width;
+        let mut total = conv_macs(self.in_channels, e, 1) + (self.embed_depth.saturating_sub(1) as u64) * conv_macs(e, e, 1);
+        total += conv_macs(e + self.unet_widths[0], self.out_hidden, 1) + conv_macs(self.out_hidden, self.out_channels, 1);
+        let k = self.unet_kernel;
+        let block = |cin: usize, cout: usize| conv_macs(cin, cout, k) + (self.convs_per_block as u64 - 1) * conv_macs(cout, cout, k);
+        let w = &self.unet_widths;
+        for l in 0..w.len() {
+            total += block(if l == 0 { e } else { w[l - 1] }, w[l]);
+            if l + 1 < w.len() {
+                total += block(w[l + 1] + w[l], w[l]);
+            }
+        }
+        total
+    }
+
     pub fn init(&self, seed: u64, device: &Device) -> PathNet {
         assert!(self.embed_depth >= 1 && !self.unet_widths.is_empty() && self.convs_per_block >= 1);
         let init = Init::TorchDefault;

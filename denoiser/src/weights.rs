@@ -15,6 +15,7 @@ use burn::store::{ApplyError, FloatCastAdapter, ModuleSnapshot, SafetensorsStore
 use burn::tensor::{DType, Device};
 use serde::{Deserialize, Serialize};
 
+use crate::kpcn::Variant;
 use crate::mskp::ScaleCompositor;
 use crate::method::{Method, MethodModel};
 use crate::model::DenoiserConfig;
@@ -192,10 +193,46 @@ fn check_config(c: &DenoiserConfig) -> Result<(), String> {
         (e.depth >= 1 && e.depth <= 64 && sane(e.width), "ensemble depth/width"),
         (odd(e.conv_kernel), "ensemble.conv_kernel"),
     ];
-    match checks.iter().find(|(ok, _)| !ok) {
-        Some((_, name)) => Err(format!("{name} out of range")),
-        None => Ok(()),
+    if let Some((_, name)) = checks.iter().find(|(ok, _)| !ok) {
+        return Err(format!("{name} out of range"));
     }
+    // The U-Net columns' constructor asserts what these check.
+    if let Some(m) = &c.mskp {
+        let fewest_inputs = [Variant::G, Variant::P, Variant::GP].iter().map(|v| v.in_channels()).min().unwrap_or(0);
+        let checks = [
+            (!m.widths.is_empty() && m.widths.len() <= 8 && m.widths.iter().all(|&w| sane(w)), "mskp.widths"),
+            (m.convs_per_block >= 1 && m.convs_per_block <= 64, "mskp.convs_per_block"),
+            ((1..=m.widths.len()).contains(&m.kernel_scales), "mskp.kernel_scales"),
+            (odd(m.filter_size), "mskp.filter_size"),
+            (m.margin <= 4096, "mskp.margin"),
+            (m.guides.len() <= 64, "mskp.guides"),
+        ];
+        if let Some((_, name)) = checks.iter().find(|(ok, _)| !ok) {
+            return Err(format!("{name} out of range"));
+        }
+        for (i, g) in m.guides.iter().enumerate() {
+            if g.len == 0 || g.start.checked_add(g.len).is_none_or(|end| end > fewest_inputs) || !g.scale.is_finite() {
+                return Err(format!("mskp.guides[{i}]: channels {}+{} outside the {fewest_inputs} inputs of a column, or scale {} not finite", g.start, g.len, g.scale));
+            }
+            if g.variance.is_some_and(|v| v >= fewest_inputs) {
+                return Err(format!("mskp.guides[{i}]: variance channel {:?} outside the {fewest_inputs} inputs of a column", g.variance));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Convolution weights (a lower bound on the parameters) of both branches of `method`'s model.
+fn kernel_weights(c: &DenoiserConfig, method: Method) -> u64 {
+    let column = |v: Variant| c.mskp_for(v).map_or_else(|| c.kpcn_for(v).kernel_weights(), |m| m.kernel_weights());
+    let path = c.pathnet.kernel_weights();
+    let per_branch = match method {
+        Method::G => column(Variant::G),
+        Method::P => column(Variant::P) + path,
+        Method::Both => column(Variant::GP) + path,
+        Method::Guided => column(Variant::G) + column(Variant::P) + path + c.ensemble.kernel_weights(),
+    };
+    2 * per_branch
 }
 
 /// Loads a weight file onto `device`. Every tensor the configured model has must be in the file
@@ -203,6 +240,17 @@ fn check_config(c: &DenoiserConfig) -> Result<(), String> {
 pub fn load(path: &Path, device: &Device) -> Result<Loaded, WeightsError> {
     let bytes = read(path)?;
     let (config, method, preset, provenance) = header(path, &bytes)?;
+    // Building the model allocates every weight the header's sizes imply; a corrupt size could
+    // ask for terabytes. The file must hold each weight in 2 bytes at least (f16), so a model
+    // larger than that cannot match it.
+    let needed = kernel_weights(&config, method);
+    if needed.saturating_mul(2) > bytes.len() as u64 {
+        return Err(WeightsError::Metadata {
+            path: path.to_path_buf(),
+            key: keys::CONFIG,
+            message: format!("the {method} model it describes has at least {needed} weights, more than the file's {} bytes can hold", bytes.len()),
+        });
+    }
     let mut model = MethodModel::init(&config, method, device);
     // Files are f16 (older ones f32); the networks compute in f32.
     let mut store = SafetensorsStore::from_bytes(Some(bytes))
@@ -370,5 +418,52 @@ mod tests {
         let e = load(&path.with_file_name("absent.safetensors"), &d).unwrap_err().to_string();
         assert!(e.contains("absent.safetensors"), "{e}");
         std::fs::remove_dir_all(path.parent().unwrap()).ok();
+    }
+
+    /// Header sizes that the constructors assert on, or that ask for far more weights than the
+    /// file holds, are refused before a network is built (denoiser/tests/fuzz_weights.rs found
+    /// the second: one config number set to 2³¹ asked for 3.7 TB).
+    #[test]
+    fn header_sizes_are_checked_before_building_the_model() {
+        use crate::mskp::{GuideGroup, MsKpConfig};
+        let d = crate::cpu_device();
+        let model = MethodModel::init(&tiny(), Method::G, &d);
+        let path = temp("sizes");
+        let refused = |cfg: &DenoiserConfig| {
+            save(&path, &model, cfg, "tiny", &Provenance::default()).unwrap();
+            load(&path, &d).unwrap_err().to_string()
+        };
+        let mut no_levels = tiny();
+        no_levels.mskp = Some(MsKpConfig::new(34).with_widths(vec![]));
+        let e = refused(&no_levels);
+        assert!(e.contains("w.safetensors") && e.contains("pixguide.config") && e.contains("mskp.widths"), "{e}");
+        let mut scales = tiny();
+        scales.mskp = Some(MsKpConfig::new(34).with_kernel_scales(0));
+        assert!(refused(&scales).contains("mskp.kernel_scales"));
+        let mut guides = tiny();
+        guides.mskp = Some(MsKpConfig::new(34).with_guides(vec![GuideGroup::new(usize::MAX, 2, 1.0, false)]));
+        assert!(refused(&guides).contains("mskp.guides[0]"));
+        // Every size within its own range, together 10¹¹ weights (400 GB to build).
+        let mut huge = tiny();
+        huge.kpcn.width = 4096;
+        huge.kpcn.depth = 64;
+        huge.kpcn.conv_kernel = 63;
+        let e = refused(&huge);
+        assert!(e.contains("pixguide.config") && e.contains("more than the file's"), "{e}");
+        std::fs::remove_dir_all(path.parent().unwrap()).ok();
+    }
+
+    /// The size check above must never refuse a real file: the weights it counts are a lower
+    /// bound on each model's parameters, and a tight one (biases and norm gains are the rest).
+    #[test]
+    fn kernel_weights_are_a_close_lower_bound_on_the_parameters() {
+        let d = crate::cpu_device();
+        for (name, cfg) in [("tiny", tiny()), ("default", DenoiserConfig::cpu_default()), ("kpcn", DenoiserConfig::kpcn_cpu())] {
+            for m in Method::ALL {
+                let params = burn::module::Module::num_params(&MethodModel::init(&cfg, m, &d)) as u64;
+                let bound = kernel_weights(&cfg, m);
+                assert!(bound <= params && bound * 10 >= params * 9, "{name} {m}: {bound} kernel weights, {params} parameters");
+            }
+        }
     }
 }

@@ -135,6 +135,25 @@ impl MsKpConfig {
         total as u64
     }
 
+    /// Convolution kernel weights (no biases): a lower bound on the column's parameter count,
+    /// which a weight file must hold (`weights::load` checks it before building the network).
+    pub fn kernel_weights(&self) -> u64 {
+        let w = &self.widths;
+        let c = self.convs_per_block as u64;
+        let block = |cin: usize, cout: usize| conv_macs(cin, cout, CONV) + (c - 1) * conv_macs(cout, cout, CONV);
+        let mut total = 0;
+        for l in 0..self.levels() {
+            total += block(if l == 0 { self.in_channels } else { w[l - 1] }, w[l]);
+            if l + 1 < self.levels() {
+                total += block(w[l + 1] + w[l], w[l]);
+            }
+            if l < self.kernel_scales {
+                total += conv_macs(w[l], self.head_channels(l), 1);
+            }
+        }
+        total
+    }
+
     /// Receptive radius (pixels per side) of one output pixel, a bound: the U-Net's (each 3×3
     /// convolution at level l adds 2^l, each pooling into l adds 2^(l−1), each bilinear
     /// upsampling from l+1 reads ±1 pixel there) plus the composite's reach (a k×k kernel at scale
