@@ -30,6 +30,7 @@ pub(crate) fn load(b: &mut Builder, path: &Path, transform: &Mat4, choice: &Mate
     // The MTL actually read, and the names that could not be found.
     let found_mtl: RefCell<Option<PathBuf>> = RefCell::new(None);
     let missing_mtl: RefCell<Vec<PathBuf>> = RefCell::new(Vec::new());
+    let mtl_problem: RefCell<Option<String>> = RefCell::new(None);
     // Field by field: the struct grows with tobj's optional features.
     let mut options = tobj::LoadOptions::default();
     options.triangulate = true;
@@ -43,7 +44,13 @@ pub(crate) fn load(b: &mut Builder, path: &Path, transform: &Mat4, choice: &Mate
         let candidate = if direct.is_file() { Some(direct) } else { mtl.file_name().map(|n| dir.join(n)).filter(|p| p.is_file()) };
         match candidate {
             Some(p) => {
-                let r = tobj::load_mtl(&p);
+                let r = std::fs::read(&p).map_err(|_| tobj::LoadError::OpenFileFailed).and_then(|text| {
+                    check_mtl(&text).map_err(|m| {
+                        mtl_problem.borrow_mut().get_or_insert(format!("'{}' {m}", p.display()));
+                        tobj::LoadError::MaterialParseError
+                    })?;
+                    tobj::load_mtl_buf(&mut &text[..])
+                });
                 if r.is_ok() && found_mtl.borrow().is_none() {
                     *found_mtl.borrow_mut() = Some(p);
                 }
@@ -61,7 +68,9 @@ pub(crate) fn load(b: &mut Builder, path: &Path, transform: &Mat4, choice: &Mate
         Ok(m) => m,
         Err(e) => {
             let missing = missing_mtl.borrow();
-            if missing.is_empty() {
+            if let Some(problem) = mtl_problem.borrow().as_ref() {
+                warn(&b.file, format!("{field}: MTL {problem}; using grey diffuse"));
+            } else if missing.is_empty() {
                 warn(&b.file, format!("{field}: MTL of '{}' unreadable ({e}); using grey diffuse", path.display()));
             } else {
                 let names: Vec<_> = missing.iter().map(|p| p.display().to_string()).collect();
@@ -115,6 +124,20 @@ pub(crate) fn load(b: &mut Builder, path: &Path, transform: &Mat4, choice: &Mate
     Ok(())
 }
 
+/// tobj 4.0 unwraps the colour of a `Ka`/`Kd`/`Ks`/`Ke` line with fewer than three numbers
+/// (a panic), so such lines are refused before the MTL reaches it.
+fn check_mtl(text: &[u8]) -> std::result::Result<(), String> {
+    for (i, line) in String::from_utf8_lossy(text).lines().enumerate() {
+        let mut words = line.split_whitespace();
+        if let Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) = words.next() {
+            if words.count() < 3 {
+                return Err(format!("line {}: {key} needs three numbers", i + 1));
+            }
+        }
+    }
+    Ok(())
+}
+
 fn convert_material(b: &mut Builder, mtl: &tobj::Material, mtl_dir: &Path, field: &str) -> Result<Material> {
     let color = |b: &Builder, key: &str, v: Option<[f32; 3]>, default: Vec3| -> Result<Vec3> {
         let c = v.map(Vec3::from).unwrap_or(default);
@@ -133,4 +156,27 @@ fn convert_material(b: &mut Builder, mtl: &tobj::Material, mtl_dir: &Path, field
         None => ColorParam::Const(kd.min(Vec3::ONE)),
     };
     Ok(Material { name: mtl.name.clone(), kind: MaterialKind::Lambert { albedo }, emission: ke, two_sided_emission: false, one_sided: false })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Found by renderer/tests/fuzz_scenes.rs: a truncated `Kd` line panicked inside tobj.
+    #[test]
+    fn short_colour_line_in_the_mtl_is_a_warning_not_a_panic() {
+        let dir = std::env::temp_dir().join(format!("pixguide-obj-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let obj = dir.join("tri.obj");
+        std::fs::write(&obj, "mtllib tri.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl red\nf 1 2 3\n").unwrap();
+        std::fs::write(dir.join("tri.mtl"), "newmtl red\nKd 0.5\n").unwrap();
+        assert_eq!(check_mtl(b"newmtl red\nKd 0.5\n").unwrap_err(), "line 2: Kd needs three numbers");
+        let mut b = Builder::new(&dir.join("scene.toml"));
+        let none = HashMap::new();
+        load(&mut b, &obj, &Mat4::IDENTITY, &MaterialChoice { all: None, by_name: &none }, "shapes[0].file").unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+        // The material falls back to grey, as for a missing MTL.
+        assert_eq!(b.mesh.triangles.len(), 1);
+        assert_eq!(b.materials[b.mesh.material[0] as usize].name, "default");
+    }
 }
