@@ -176,7 +176,7 @@ mod tests {
         bytes[at + 8..at + 12].copy_from_slice(&99_999i32.to_le_bytes());
         bytes[at + 12..at + 16].copy_from_slice(&99_999i32.to_le_bytes());
         std::fs::write(&p, bytes).unwrap();
-        let e = read_frame(&p).err().expect("an error").to_string();
+        let e = read_frame(&p).expect_err("an error").to_string();
         std::fs::remove_dir_all(&dir).ok();
         assert!(e.contains("huge.exr") && e.contains("dataWindow of 100000×100000"), "{e}");
     }
