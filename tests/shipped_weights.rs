@@ -81,3 +81,14 @@ fn shipped_swap_guided_model_beats_the_noisy_render() {
     assert_eq!((m.kernel_scales, m.compositor), (5, denoiser::mskp::ScaleCompositor::LowPassSwap));
     check("swap/guided-default", Method::Guided);
 }
+
+/// The opt-in edge-noise models (preset `edge-noise`, docs/denoiser.md, "Colour distances in
+/// units of the noise"): their files name the noise-normalised colour guides, and they run with
+/// them.
+#[test]
+fn shipped_edge_noise_guided_model_beats_the_noisy_render() {
+    let l = denoiser::weights::load(&root().join("denoiser/weights/edge-noise/guided-default.safetensors"), &denoiser::cpu_device()).unwrap();
+    let m = l.config.mskp.as_ref().expect("a U-Net model");
+    assert_eq!(m.edge_stopping, denoiser::mskp::EdgeStopping::FeaturesAndNoisyColour);
+    check("edge-noise/guided-default", Method::Guided);
+}
