@@ -170,15 +170,7 @@ fn identity_kernels_keep_the_input_at_any_blend_weight() {
     // A step edge plus noise: what a converged frame's silhouette looks like.
     let x: Vec<f64> = (0..dims.iter().product()).map(|i| if i % 16 < 7 { 0.02 } else { 1.0 } + 0.01 * rng.next_f64()).collect();
     let mut net = cfg.init(1, &d);
-    let taps = 9;
-    set_constant_heads(&mut net, &cfg, |_, n| {
-        let mut bias = vec![-60.0f32; n];
-        bias[taps / 2] = 60.0;
-        if n > taps {
-            bias[taps] = 60.0; // α = 1
-        }
-        bias
-    });
+    set_constant_heads(&mut net, &cfg, identity_kernels_full_blend(&cfg, None));
     let worst = largest_change(&net, &cfg, &x, 16);
     assert!(worst < 1e-5, "identity kernels with α = 1 changed the input by {worst}");
 }
@@ -198,14 +190,7 @@ fn edge_stopping_keeps_a_guided_step_edge() {
         .collect();
     for (strength, expect_sharp) in [(12.0f32, true), (-12.0, false)] {
         let mut net = cfg.init(1, &d);
-        set_constant_heads(&mut net, &cfg, |s, n| {
-            let mut bias = vec![0.0f32; n];
-            if s + 1 < cfg.kernel_scales {
-                bias[9] = -60.0; // α = 0
-            }
-            bias[n - 1] = strength;
-            bias
-        });
+        set_constant_heads(&mut net, &cfg, box_kernels_no_blend(&cfg, Some(strength)));
         let worst = largest_change(&net, &cfg, &x, 16);
         if expect_sharp {
             assert!(worst < 1e-5, "edge-stopped box kernels moved the edge by {worst}");
@@ -242,15 +227,7 @@ fn a_feature_smaller_than_a_coarse_pixel_survives_the_convex_blend() {
     let dark = 7 * 16 + 9;
     let x: Vec<f64> = (0..4 * 256).map(|i| if i / 256 == 3 { f64::from(u8::from(i % 256 == dark)) } else if i % 256 == dark { 0.02 } else { 1.0 }).collect();
     let mut net = cfg.init(1, &d);
-    set_constant_heads(&mut net, &cfg, |s, n| {
-        let mut bias = vec![-60.0f32; n];
-        bias[4] = 60.0; // identity kernel
-        if s + 1 < cfg.kernel_scales {
-            bias[9] = 60.0; // α = 1
-        }
-        bias[n - 1] = 12.0;
-        bias
-    });
+    set_constant_heads(&mut net, &cfg, identity_kernels_full_blend(&cfg, Some(12.0)));
     let worst = largest_change(&net, &cfg, &x, 16);
     assert!(worst < 1e-4, "the dark pixel changed by {worst}");
 }
@@ -267,13 +244,7 @@ fn noise_normalised_colour_guide_stops_only_at_steps_the_noise_cannot_explain() 
     for (variance, expect_sharp) in [(1e-4, true), (10.0, false)] {
         let x: Vec<f64> = (0..4 * 256).map(|i| if i / 256 == 3 { variance } else if side(i) { 0.02 } else { 1.0 }).collect();
         let mut net = cfg.init(1, &d);
-        set_constant_heads(&mut net, &cfg, |s, n| {
-            let mut bias = vec![0.0f32; n];
-            if s + 1 < cfg.kernel_scales {
-                bias[9] = -60.0; // α = 0
-            }
-            bias
-        });
+        set_constant_heads(&mut net, &cfg, box_kernels_no_blend(&cfg, None));
         let worst = largest_change(&net, &cfg, &x, 16);
         if expect_sharp {
             assert!(worst < 1e-5, "a 98σ step was blurred by {worst}");
@@ -298,21 +269,44 @@ fn joint_bilateral_upsampling_keeps_a_guided_edge_through_the_convex_blend() {
         .collect();
     for (strength, expect_sharp) in [(12.0f32, true), (-12.0, false)] {
         let mut net = cfg.init(1, &d);
-        set_constant_heads(&mut net, &cfg, |s, n| {
-            let mut bias = vec![-60.0f32; n];
-            bias[4] = 60.0; // identity kernel
-            if s + 1 < cfg.kernel_scales {
-                bias[9] = 60.0; // α = 1
-            }
-            bias[n - 1] = strength;
-            bias
-        });
+        set_constant_heads(&mut net, &cfg, identity_kernels_full_blend(&cfg, Some(strength)));
         let worst = largest_change(&net, &cfg, &x, 16);
         if expect_sharp {
             assert!(worst < 1e-4, "joint-bilateral upsampling moved the edge by {worst}");
         } else {
             assert!(worst > 0.1, "bilinear upsampling should blur the edge ({worst})");
         }
+    }
+}
+
+/// Head biases for 3×3 kernels: box kernels (all logits 0) with α = 0 (no coarse levels), and
+/// the last guide's log-strength when given (else 0).
+fn box_kernels_no_blend(cfg: &MsKpConfig, strength: Option<f32>) -> impl Fn(usize, usize) -> Vec<f32> + '_ {
+    move |s, n| {
+        let mut bias = vec![0.0f32; n];
+        if s + 1 < cfg.kernel_scales {
+            bias[9] = -60.0; // α = 0
+        }
+        if let Some(w) = strength {
+            bias[n - 1] = w;
+        }
+        bias
+    }
+}
+
+/// Head biases for 3×3 kernels: one-hot centre kernels with α = 1 (only the coarsest level
+/// survives, upsampled), and the last guide's log-strength when given (else −60).
+fn identity_kernels_full_blend(cfg: &MsKpConfig, strength: Option<f32>) -> impl Fn(usize, usize) -> Vec<f32> + '_ {
+    move |s, n| {
+        let mut bias = vec![-60.0f32; n];
+        bias[4] = 60.0; // identity kernel
+        if s + 1 < cfg.kernel_scales {
+            bias[9] = 60.0; // α = 1
+        }
+        if let Some(w) = strength {
+            bias[n - 1] = w;
+        }
+        bias
     }
 }
 
