@@ -23,6 +23,9 @@ pub enum EdgeStopping {
     /// noisy pixels still average, and as the variance falls with more samples every real
     /// difference stops the kernel, which tends to the identity on a converged input.
     FeaturesAndNoisyColour,
+    /// As `FeaturesAndNoisyColour`, with the two-sided test of [`GuideGroup::two_sided`]: the
+    /// `edge-noise` preset since 2026-11-25.
+    FeaturesAndTwoSidedNoisyColour,
 }
 
 /// Input channels `start..start + len` used as an edge-stopping guide, multiplied by `scale`
@@ -37,6 +40,14 @@ pub enum EdgeStopping {
 /// distance of Rousselle et al. 2012 (docs/method.md §12): the subtraction removes what the noise
 /// alone adds to a squared difference, the division puts it in units of that noise. Its strength
 /// starts at `init_log_strength` (e^`GUIDE_STRENGTH_INIT` when `None`).
+///
+/// A `two_sided` group subtracts 2(v_p + v_q) instead (see [`TWO_SIDED_NOISE_FACTOR`]), what the noise of both pixels adds: the
+/// distance is then symmetric in p and q, a two-sample test of equal means. Rousselle's
+/// one-sided form was made for a pixel whose variance estimate is sound; at 2 spp a pixel whose
+/// samples both found no light reports v = 0, and its distance to a lit neighbour came out twice
+/// the neighbour's distance to it. Zero pixels then refused the lit ones while the lit ones took
+/// the zeros in: veach-ajar at 2 spp came out at 0.54 of the reference's brightness (median over
+/// pixels; docs/denoiser.md, "Two-sided noise test").
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GuideGroup {
     pub start: usize,
@@ -52,11 +63,15 @@ pub struct GuideGroup {
     /// Normalise by [`pooled_variance`] instead of the pixel's own variance.
     #[serde(default)]
     pub pooled_variance: bool,
+    /// Subtract 2(v_p + v_q) (symmetric) instead of v_p + min(v_p, v_q). Files without the field
+    /// have the one-sided form.
+    #[serde(default)]
+    pub two_sided: bool,
 }
 
 impl GuideGroup {
     pub fn new(start: usize, len: usize, scale: f64, log: bool) -> Self {
-        GuideGroup { start, len, scale, log, brighter_only: false, variance: None, init_log_strength: None, pooled_variance: false }
+        GuideGroup { start, len, scale, log, brighter_only: false, variance: None, init_log_strength: None, pooled_variance: false, two_sided: false }
     }
 
     pub fn brighter_only(self) -> Self {
@@ -73,6 +88,11 @@ impl GuideGroup {
         GuideGroup { variance: Some(channel), pooled_variance: true, ..self }
     }
 
+    /// The symmetric test of [`GuideGroup::two_sided`].
+    pub fn two_sided(self) -> Self {
+        GuideGroup { two_sided: true, ..self }
+    }
+
     pub fn with_init_log_strength(self, s: f32) -> Self {
         GuideGroup { init_log_strength: Some(s), ..self }
     }
@@ -85,13 +105,14 @@ pub struct GuideLevel {
     x: Tensor<4>,
     var: Option<Tensor<4>>,
     brighter_only: bool,
+    two_sided: bool,
 }
 
 impl GuideLevel {
     /// The next coarser level: 2×2 box means, whose variance is a quarter of the mean variance
     /// (independent pixels).
     pub(super) fn down(&self) -> Self {
-        GuideLevel { x: box_down(self.x.clone()), var: self.var.clone().map(|v| box_down(v).div_scalar(4.0)), brighter_only: self.brighter_only }
+        GuideLevel { x: box_down(self.x.clone()), var: self.var.clone().map(|v| box_down(v).div_scalar(4.0)), brighter_only: self.brighter_only, two_sided: self.two_sided }
     }
 }
 
@@ -99,17 +120,30 @@ impl GuideLevel {
 /// all agree); in the colour's units squared, far below any visible difference.
 const NOISE_EPS: f32 = 1e-4;
 
+/// How many times v_p + v_q a two-sided test lets pass free. The renderer reports the
+/// population variance of the mean, which at N spp is (N − 1)/N of the unbiased estimate: half
+/// at 2 spp, where the test matters most (a pixel with one lit sample of two is then exactly
+/// consistent with a black neighbour). With the pixel's own variance (factor 1) the shipped
+/// one-sided weights still left veach-ajar at 0.67 of its brightness at 2 spp, at 2 at 0.81
+/// (docs/denoiser.md, "Two-sided noise test"). At high spp a difference must exceed 1.4 σ
+/// instead of 1 σ before it costs anything; the learned strength scales what is beyond.
+const TWO_SIDED_NOISE_FACTOR: f32 = 2.0;
+
 /// Guide distances between taps q `[B, C, T, N]` (variances `[B, 1, T, N]`) and centres p
 /// `[B, C, 1, N]` (`[B, 1, 1, N]`) → `[B, T, N]`.
-fn guide_distance(q: Tensor<4>, p: Tensor<4>, var: Option<(Tensor<4>, Tensor<4>)>, brighter_only: bool) -> Tensor<3> {
+fn guide_distance(q: Tensor<4>, p: Tensor<4>, var: Option<(Tensor<4>, Tensor<4>)>, g: &GuideLevel) -> Tensor<3> {
     let diff = q - p;
-    let diff = if brighter_only { diff.clamp_min(0.0) } else { diff };
+    let diff = if g.brighter_only { diff.clamp_min(0.0) } else { diff };
     let d2 = diff.square();
     match var {
         None => d2.sum_dim(1).squeeze_dim(1),
         Some((vq, vp)) => {
-            let min = (vq.clone() + vp.clone() - (vq.clone() - vp.clone()).abs()).mul_scalar(0.5);
-            let excess = (d2 - (vp.clone() + min)).clamp_min(0.0);
+            let explained = if g.two_sided {
+                (vq.clone() + vp.clone()).mul_scalar(TWO_SIDED_NOISE_FACTOR)
+            } else {
+                vp.clone() + (vq.clone() + vp.clone() - (vq.clone() - vp.clone()).abs()).mul_scalar(0.5)
+            };
+            let excess = (d2 - explained).clamp_min(0.0);
             (excess / (vq + vp).add_scalar(NOISE_EPS)).sum_dim(1).squeeze_dim(1)
         }
     }
@@ -125,7 +159,7 @@ pub fn tap_distances(g: &GuideLevel, k: usize) -> Tensor<4> {
         unfold4d(pad_reflect(x.clone(), k / 2), [k, k], UnfoldOptions::new([1, 1], [0, 0], [1, 1])).reshape([b, c, k * k, h * w])
     };
     let var = g.var.as_ref().map(|v| (windows(v), v.clone().reshape([b, 1, 1, h * w])));
-    guide_distance(windows(&g.x), g.x.clone().reshape([b, c, 1, h * w]), var, g.brighter_only).reshape([b, k * k, h, w])
+    guide_distance(windows(&g.x), g.x.clone().reshape([b, c, 1, h * w]), var, g).reshape([b, k * k, h, w])
 }
 
 /// Side of the window whose mean variance a pixel's own may not fall below (see
@@ -158,7 +192,7 @@ pub(super) fn guide_features(input: &Tensor<4>, guides: &[GuideGroup]) -> Vec<Gu
                 let v = if g.pooled_variance { pooled_variance(v) } else { v };
                 v.mul_scalar(g.scale * g.scale)
             });
-            GuideLevel { x: x.mul_scalar(g.scale), var, brighter_only: g.brighter_only }
+            GuideLevel { x: x.mul_scalar(g.scale), var, brighter_only: g.brighter_only, two_sided: g.two_sided }
         })
         .collect()
 }
@@ -228,7 +262,7 @@ pub(super) fn joint_upsample(coarse: Tensor<4>, fallback: Tensor<4>, coarse_guid
     for (i, (cg, fg)) in coarse_guides.iter().zip(fine_guides).enumerate() {
         let gc = fg.x.dims()[1];
         let var = cg.var.as_ref().zip(fg.var.as_ref()).map(|(cv, fv)| (coarse_windows(cv.clone(), fh, fw), fv.clone().reshape([b, 1, 1, n])));
-        let d = guide_distance(coarse_windows(cg.x.clone(), fh, fw), fg.x.clone().reshape([b, gc, 1, n]), var, fg.brighter_only);
+        let d = guide_distance(coarse_windows(cg.x.clone(), fh, fw), fg.x.clone().reshape([b, gc, 1, n]), var, fg);
         logits = logits - d * strength.clone().narrow(1, i, 1).reshape([b, 1, n]);
     }
     let own = Tensor::<3>::full([b, 1, n], UPSAMPLE_FALLBACK_LOG_WEIGHT, &coarse.device());
