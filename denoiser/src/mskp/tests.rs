@@ -254,6 +254,46 @@ fn noise_normalised_colour_guide_stops_only_at_steps_the_noise_cannot_explain() 
     }
 }
 
+/// A dim scene at 2 spp: a sixth of the pixels caught the light in one of their two samples
+/// (mean m, population variance of the mean m²/2, what the renderer reports), the rest in none
+/// (0, variance 0). Box kernels at strength e^0 with the two-sided test see no difference
+/// the noise cannot explain (m² = 2·(0 + m²/2)): they stay box kernels and keep the image's
+/// mean brightness (to float rounding). The
+/// one-sided form of Rousselle et al. gives a black pixel's lit neighbour twice the distance it
+/// gives the lit pixel's black one, so black pixels keep black and lit ones take the black in:
+/// the same image lost 15 % of its brightness (veach-ajar at 2 spp lost 46 % with the
+/// 2026-11-24 weights).
+#[test]
+fn two_sided_noise_test_keeps_the_brightness_of_a_sparse_2spp_image() {
+    let d = cpu_device();
+    let side = 32;
+    let n = side * side;
+    let mut rng = SplitMix64::new(7);
+    let lit: Vec<bool> = (0..n).map(|_| rng.below(6) == 0).collect();
+    let m = 3.0;
+    let x: Vec<f64> = (0..4 * n).map(|i| match (i / n, lit[i % n]) { (_, false) => 0.0, (3, true) => m * m / 2.0, (_, true) => m }).collect();
+    let mean_change = |group: GuideGroup| {
+        let cfg = tiny(4).with_compositor(ScaleCompositor::ConvexBlend).with_guides(vec![group]);
+        let mut net = cfg.init(1, &d);
+        set_constant_heads(&mut net, &cfg, box_kernels_no_blend(&cfg, Some(0.0)));
+        let out = to_vec(net.forward(tensor(&x, [1, 4, side, side], &d)));
+        let o = side - 2 * cfg.margin;
+        // What plain 3×3 box kernels give on the kept window (they read one pixel beyond it).
+        let boxed = |i: usize| {
+            let (y, xx) = (i / o + cfg.margin, i % o + cfg.margin);
+            let taps = (0..9).filter(|t| lit[(y + t / 3 - 1) * side + xx + t % 3 - 1]).count();
+            taps as f64 * m / 9.0
+        };
+        let before = (0..o * o).map(boxed).sum::<f64>() / (o * o) as f64;
+        let after = out[..o * o].iter().sum::<f64>() / (o * o) as f64;
+        after / before - 1.0
+    };
+    let one_sided = mean_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3));
+    let two_sided = mean_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3).two_sided());
+    assert!(two_sided.abs() < 1e-5, "two-sided test changed the mean brightness by {two_sided}");
+    assert!(one_sided < -0.05, "the one-sided form should darken a sparse image ({one_sided})");
+}
+
 /// The convex blend at α = 1 with identity kernels returns the coarse levels, upsampled. A
 /// step edge on the coarsest grid with a guide that steps with it comes back exactly when the
 /// upsampling is joint-bilateral (each fine pixel takes only coarse pixels on its side), and
