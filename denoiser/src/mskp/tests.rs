@@ -294,6 +294,36 @@ fn two_sided_noise_test_keeps_the_brightness_of_a_sparse_2spp_image() {
     assert!(one_sided < -0.05, "the one-sided form should darken a sparse image ({one_sided})");
 }
 
+/// A firefly at 64 spp: one sample of 64 hit a bright caustic, so the pixel's mean is up by
+/// Δ = S/64 and its variance of the mean is about Δ². Its neighbours (0.5, variance 10⁻⁶) must
+/// not take it in: the one-sided test explains only what the neighbour's own noise adds
+/// (2·10⁻⁶), so at strength e^3 they keep their value; the two-sided test calls the same
+/// difference noise (Δ² < 2(v_p + v_q)) and lets it in. That is why the `edge-noise` preset keeps
+/// the pixel's own variance one-sided and makes only the pooled guide two-sided.
+#[test]
+fn one_sided_own_variance_guide_keeps_a_firefly_out_of_its_neighbours() {
+    let d = cpu_device();
+    let side = 16;
+    let n = side * side;
+    let fly = 7 * side + 8;
+    let delta = 0.4;
+    let x: Vec<f64> = (0..4 * n)
+        .map(|i| match (i / n, i % n == fly) { (3, true) => delta * delta * 63.0 / 64.0, (3, false) => 1e-6, (_, true) => 0.5 + delta, (_, false) => 0.5 })
+        .collect();
+    let neighbours_change = |group: GuideGroup| {
+        let cfg = tiny(4).with_compositor(ScaleCompositor::ConvexBlend).with_guides(vec![group]);
+        let mut net = cfg.init(1, &d);
+        set_constant_heads(&mut net, &cfg, box_kernels_no_blend(&cfg, Some(3.0)));
+        let out = to_vec(net.forward(tensor(&x, [1, 4, side, side], &d)));
+        let o = side - 2 * cfg.margin;
+        (0..3 * o * o).filter(|i| (i % (o * o) / o + cfg.margin) * side + i % o + cfg.margin != fly).map(|i| (out[i] - 0.5).abs()).fold(0.0, f64::max)
+    };
+    let one_sided = neighbours_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3));
+    let two_sided = neighbours_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3).two_sided());
+    assert!(one_sided < 1e-3, "the one-sided test let the firefly into its neighbours ({one_sided})");
+    assert!(two_sided > 0.02, "the two-sided test should let the firefly in ({two_sided})");
+}
+
 /// The convex blend at α = 1 with identity kernels returns the coarse levels, upsampled. A
 /// step edge on the coarsest grid with a guide that steps with it comes back exactly when the
 /// upsampling is joint-bilateral (each fine pixel takes only coarse pixels on its side), and
