@@ -82,7 +82,7 @@ fn render_and_denoise_in_one_process() {
     // The guided model needs the split, the G-buffers and the descriptors; they were recorded.
     assert!(noisy_frame.diffuse.is_some() && noisy_frame.albedo.is_some());
     let img = image::open(&wpng).unwrap();
-    assert_eq!((img.width(), img.height()), (2 * 256 + 4, 256 + 12));
+    assert_eq!((img.width(), img.height()), (2 * 256 + 4, 256 + 16));
     assert!(png.metadata().unwrap().len() > 0);
 }
 

@@ -77,8 +77,8 @@ fn plots_and_tabulates_synthetic_runs() {
     assert!(stdout.contains("leave out validation"), "{stdout}");
 
     let img = image::open(&png).unwrap().to_rgb8();
-    // 1100 wide; 34 title + 440 panels + one legend row (26) + two note lines (32) + 6.
-    assert_eq!(img.dimensions(), (1100, 538));
+    // 1100 wide; 34 title + 440 panels + one legend row (30) + two note lines (36) + 6.
+    assert_eq!(img.dimensions(), (1100, 546));
     // Each run's colour (Tableau 10: blue, orange, green) is drawn in both panels, above the
     // legend (whose swatches alone would not count).
     for (k, rgb) in [[31u8, 119, 180], [255, 127, 14], [44, 160, 44]].into_iter().enumerate() {

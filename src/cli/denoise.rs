@@ -166,7 +166,7 @@ pub fn write_weights_png(path: &Path, d: &Denoised) -> Result<()> {
         bail!("--weights-png needs the guided model (only it blends two denoisers)");
     };
     let (w, h) = (d.width as u32, d.height as u32);
-    let (gap, label) = (4u32, 12u32);
+    let (gap, label) = (4u32, super::font::BAR_H);
     let sw = 2 * w + gap;
     let sh = h + label;
     let mut px = vec![32u8; (sw * sh * 3) as usize];
@@ -180,8 +180,9 @@ pub fn write_weights_png(path: &Path, d: &Denoised) -> Result<()> {
                 px[o..o + 3].copy_from_slice(&[c.r, c.g, c.b]);
             }
         }
+        // A narrower tile holds no legible label.
         if w >= 40 {
-            super::font::draw_text(&mut px, sw, x0 + 2, 2, name);
+            super::font::bar_label(&mut px, sw, (x0, 0), w, name);
         }
     }
     ensure_parent(path)?;

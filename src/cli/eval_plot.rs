@@ -1,6 +1,5 @@
 //! Plots of `pixguide eval`: plotters drawing into an RGB buffer through a backend whose text is
-//! the built-in bitmap font (src/cli/font.rs). No font file, font-kit, fontconfig or freetype is
-//! involved, so the plots come out the same on a fresh machine with no system fonts.
+//! the embedded DejaVu Sans (src/cli/font.rs), so no system font is looked for.
 
 use super::font;
 use anyhow::{anyhow, Result};
@@ -22,17 +21,6 @@ impl<'a> Canvas<'a> {
     pub fn new(px: &'a mut [u8], w: u32, h: u32) -> Self {
         Canvas { px, w, h }
     }
-}
-
-/// Bitmap-font scale for a requested text size in pixels (the glyphs are 5 pixels tall).
-fn scale_for(size: f64) -> i32 {
-    ((size / 7.0).round() as i32).max(1)
-}
-
-/// Width and height of `text` at glyph scale `s` (3 pixels per glyph + 1 of spacing).
-fn text_box(text: &str, s: i32) -> (i32, i32) {
-    let n = text.chars().count() as i32;
-    ((4 * n - 1).max(0) * s, 5 * s)
 }
 
 impl DrawingBackend for Canvas<'_> {
@@ -63,8 +51,8 @@ impl DrawingBackend for Canvas<'_> {
     }
 
     fn draw_text<S: BackendTextStyle>(&mut self, text: &str, style: &S, pos: BackendCoord) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
-        let s = scale_for(style.size());
-        let (tw, th) = text_box(text, s);
+        let m = font::mask(text, style.size() as f32);
+        let (tw, th) = (m.w as i32, m.h as i32);
         let anchor = style.anchor();
         let dx = match anchor.h_pos {
             HPos::Left => 0,
@@ -76,18 +64,24 @@ impl DrawingBackend for Canvas<'_> {
             VPos::Center => -th / 2,
             VPos::Bottom => -th,
         };
+        // The anchor applies before the rotation, as in plotters' own backends: a rotated axis
+        // label is centred on its axis.
         let trans: FontTransform = style.transform();
         let color = style.color();
-        for (gx, gy) in font::pixels(text, s as u32) {
-            let (x, y) = trans.transform(gx as i32 + dx, gy as i32 + dy);
-            self.draw_pixel((pos.0 + x, pos.1 + y), color)?;
+        for my in 0..th {
+            for mx in 0..tw {
+                let c = m.coverage[(my * tw + mx) as usize] as f64;
+                if c > 0.0 {
+                    let (x, y) = trans.transform(mx + dx, my + dy);
+                    self.draw_pixel((pos.0 + x, pos.1 + y), BackendColor { alpha: color.alpha * c, rgb: color.rgb })?;
+                }
+            }
         }
         Ok(())
     }
 
     fn estimate_text_size<S: BackendTextStyle>(&self, text: &str, style: &S) -> Result<(u32, u32), DrawingErrorKind<Self::ErrorType>> {
-        let (w, h) = text_box(text, scale_for(style.size()));
-        Ok((w as u32, h as u32))
+        Ok(font::text_size(text, style.size() as f32))
     }
 }
 
@@ -161,7 +155,7 @@ pub(super) fn ticks_at_least(lo: f64, hi: f64, n: usize) -> Vec<f64> {
 }
 
 fn tick(v: f64) -> String {
-    if v >= 100.0 {
+    if v >= 100.0 || (v >= 1.0 && v.fract() == 0.0) {
         format!("{v:.0}")
     } else if v >= 1.0 {
         format!("{v:.1}")
@@ -178,7 +172,7 @@ fn panel(area: &DrawingArea<Canvas<'_>, Shift>, title: &str, x_label: &str, y_la
     let x_keys = x_keys.unwrap_or_else(|| ticks(x0, x1));
     let err = |e: DrawingAreaErrorKind<std::io::Error>| anyhow!("plot: {e}");
     let mut chart = ChartBuilder::on(area)
-        .caption(title, ("sans-serif", 14))
+        .caption(title, ("sans-serif", CAPTION_SIZE))
         .margin(10)
         .x_label_area_size(42)
         .y_label_area_size(56)
@@ -188,8 +182,8 @@ fn panel(area: &DrawingArea<Canvas<'_>, Shift>, title: &str, x_label: &str, y_la
         .configure_mesh()
         .x_desc(x_label)
         .y_desc(y_label)
-        .label_style(("sans-serif", 12))
-        .axis_desc_style(("sans-serif", 14))
+        .label_style(("sans-serif", TICK_SIZE))
+        .axis_desc_style(("sans-serif", AXIS_SIZE))
         .x_label_formatter(&|v| tick(*v))
         .y_label_formatter(&|v| tick(*v))
         .light_line_style(RGBColor(235, 235, 235))
@@ -221,15 +215,23 @@ fn legend_entries<'a>(sets: &[&'a [Curve]]) -> Vec<(usize, &'a str)> {
     out
 }
 
-const LEGEND_SCALE: u32 = 2;
-const LEGEND_ROW: u32 = 18;
+/// Text sizes in pixels (ascent to descent) of the panel captions, tick labels, axis names and
+/// legend, shared with the training plots.
+pub(super) const CAPTION_SIZE: f32 = 18.0;
+pub(super) const TICK_SIZE: f32 = 14.0;
+pub(super) const AXIS_SIZE: f32 = 15.0;
+const LEGEND_SIZE: f32 = 15.0;
+const LEGEND_ROW: u32 = 22;
+/// Swatch and gap before a legend label, and space after it.
+const SWATCH_W: u32 = 22;
+const ENTRY_GAP: u32 = 18;
 
 /// Rows of legend entries laid out left to right in `width` pixels: (x, row) of each entry.
 fn legend_layout(entries: &[(usize, &str)], width: u32) -> Vec<(u32, u32)> {
     let (mut x, mut row) = (12u32, 0u32);
     let mut out = Vec::with_capacity(entries.len());
     for (_, label) in entries {
-        let w = 22 + label.chars().count() as u32 * 4 * LEGEND_SCALE + 18;
+        let w = SWATCH_W + font::text_size(label, LEGEND_SIZE).0 + ENTRY_GAP;
         if x + w > width && x > 12 {
             x = 12;
             row += 1;
@@ -253,13 +255,14 @@ pub(super) fn draw_legend(px: &mut [u8], width: u32, top: u32, entries: &[(usize
     for (&(c, label), (x, row)) in entries.iter().zip(legend_layout(entries, width)) {
         let y = top + row * LEGEND_ROW + 4;
         let RGBColor(r, g, b) = colour(c);
-        for yy in (y + 4..y + 7).filter(|&yy| yy < h) {
+        // Level with the middle of the lower-case letters.
+        for yy in (y + 7..y + 10).filter(|&yy| yy < h) {
             for xx in (x..x + 16).filter(|&xx| xx < width) {
                 let o = ((yy * width + xx) * 3) as usize;
                 px[o..o + 3].copy_from_slice(&[r, g, b]);
             }
         }
-        text(px, width, x + 22, y, LEGEND_SCALE, [40, 40, 40], label);
+        font::draw(px, width, (x + SWATCH_W, y), width, LEGEND_SIZE, [40, 40, 40], label);
     }
 }
 
@@ -284,14 +287,6 @@ pub fn write_pair(path: &Path, x_label: &str, x_keys: Option<Vec<f64>>, left: (&
     Ok(())
 }
 
-/// Text in colour `rgb` at glyph scale `s` into an RGB8 buffer `width` pixels wide.
-pub fn text(px: &mut [u8], width: u32, x: u32, y: u32, s: u32, rgb: [u8; 3], t: &str) {
-    let mut c = Canvas { h: px.len() as u32 / 3 / width.max(1), px, w: width };
-    for (gx, gy) in font::pixels(t, s) {
-        let _ = c.draw_pixel(((x + gx) as i32, (y + gy) as i32), BackendColor { alpha: 1.0, rgb: (rgb[0], rgb[1], rgb[2]) });
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -312,7 +307,7 @@ mod tests {
         let layout = legend_layout(&entries, 600);
         assert!(layout.iter().map(|p| p.1).max().unwrap() >= 2);
         for (k, ((_, l), (x, row))) in entries.iter().zip(&layout).enumerate() {
-            let end = x + 22 + l.chars().count() as u32 * 4 * LEGEND_SCALE;
+            let end = x + SWATCH_W + font::text_size(l, LEGEND_SIZE).0;
             assert!(end <= 600, "{l} ends at {end}");
             if let Some(&(nx, nrow)) = layout.get(k + 1) {
                 assert!(nrow > *row || nx > end);

@@ -2,6 +2,7 @@
 
 use super::eval::{self, EvalArgs, MethodSpec, Outcome, PictureData, Record, BREAKDOWN_METHODS, NORM_SPP, PICTURE_METHODS};
 use super::eval_plot::{self, Curve};
+use super::font;
 use anyhow::{Context, Result};
 use denoiser::metrics::{self, ToneMap};
 use std::fmt::Write as _;
@@ -219,8 +220,8 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
     };
     let spp_png = dir.join("error-vs-spp.png");
     let time_png = dir.join("error-vs-time.png");
-    eval_plot::write_pair(&spp_png, "samples per pixel", Some(spps.iter().map(|&s| s as f64).collect()), ("relMSE / 2-spp noisy", &curves(Metric::RelMse, false)), ("1-SSIM / 2-spp noisy", &curves(Metric::Ssim, false)))?;
-    eval_plot::write_pair(&time_png, "seconds (render + denoise)", None, ("relMSE / 2-spp noisy", &curves(Metric::RelMse, true)), ("1-SSIM / 2-spp noisy", &curves(Metric::Ssim, true)))?;
+    eval_plot::write_pair(&spp_png, "samples per pixel", Some(spps.iter().map(|&s| s as f64).collect()), ("relMSE / 2-spp noisy", &curves(Metric::RelMse, false)), ("1 − SSIM / 2-spp noisy", &curves(Metric::Ssim, false)))?;
+    eval_plot::write_pair(&time_png, "seconds (render + denoise)", None, ("relMSE / 2-spp noisy", &curves(Metric::RelMse, true)), ("1 − SSIM / 2-spp noisy", &curves(Metric::Ssim, true)))?;
     writeln!(w, "\n## Error against samples per pixel and against time\n")?;
     writeln!(w, "Mean normalised error, log-log; one curve per method, plain Monte Carlo included (the paper's Fig. 4 and Fig. 10).\n")?;
     writeln!(w, "![error vs spp]({rel}/error-vs-spp.png)\n\n![error vs time]({rel}/error-vs-time.png)\n")?;
@@ -370,8 +371,9 @@ impl Sheet {
                 self.px[o..o + 3].copy_from_slice(&rgb8[i..i + 3]);
             }
         }
-        eval_plot::text(&mut self.px, self.w, x0 + 2, y0 + 2, 2, [255, 255, 255], label);
-        eval_plot::text(&mut self.px, self.w, x0 + 2, y0 + 15, 2, [200, 200, 200], sub);
+        let max_w = self.tile.0.saturating_sub(3);
+        font::label(&mut self.px, self.w, (x0 + 2, y0 + 1), max_w, 13.0, [255, 255, 255], label);
+        font::label(&mut self.px, self.w, (x0 + 2, y0 + 15), max_w, 12.0, [200, 200, 200], sub);
     }
     fn save(self, path: &Path) -> Result<()> {
         let h = self.px.len() as u32 / 3 / self.w;
@@ -511,7 +513,7 @@ pub fn write_pictures(dir: &Path, p: &PictureData) -> Result<()> {
     let shown: Vec<&Vec<[f64; 3]>> = ordered.iter().zip(&toned).filter(|(i, _)| i.0 != "noisy").map(|(_, t)| t).collect();
     let score: Vec<f64> = (0..w * h).map(|i| shown.iter().map(|t| (0..3).map(|c| (t[i][c] - reference[i][c]).powi(2)).sum::<f64>()).sum()).collect();
     let win = hardest_window(&score, w, h);
-    let zoom_label = format!("{ZOOM}x zoom");
+    let zoom_label = format!("{ZOOM}× zoom");
     let to8 = |t: &[[f64; 3]]| -> Vec<[u8; 3]> { t.iter().map(|c| c.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8)).collect() };
     let mapped = |v: &[f64], colour: &dyn Fn(f64) -> [u8; 3]| -> Vec<[u8; 3]> { v.iter().map(|&x| colour(x)).collect() };
     // Frame on row 0 (window outlined), zoom on row 1.
@@ -534,7 +536,7 @@ pub fn write_pictures(dir: &Path, p: &PictureData) -> Result<()> {
         both_rows(&mut sheet, k, mapped(&errors[k], &inferno_log), label, &format!("relMSE {rel:.4}"), &format!("{:.4}", window_mean(&errors[k], w, win)));
     }
     let (bar, bs) = colour_bar(tile.1, |t| inferno_log(10f64.powf(4.0 * t - 4.0)));
-    sheet.put(0, ordered.len(), &bar, bs, "scale", "1E-4 to 1");
+    sheet.put(0, ordered.len(), &bar, bs, "scale", "10⁻⁴ to 1");
     sheet.save(&errors_png)?;
 
     let mut sheet = Sheet::new(3, 2, tile);

@@ -1,88 +1,121 @@
-//! A 3×5 pixel font for labelling contact sheets and plots without shipping a font file.
+//! Text of the plots and picture sheets in DejaVu Sans (assets/fonts/, licence beside it),
+//! embedded in the binary: the PNGs come out the same on a fresh machine with no system fonts,
+//! and no font-kit, fontconfig or freetype is involved.
 
-/// Each glyph is 5 rows of 3 bits (MSB = left column), top row first. Letters have one case.
-pub fn glyph(c: char) -> [u8; 5] {
-    match c.to_ascii_uppercase() {
-        'A' => [2, 5, 7, 5, 5],
-        'B' => [6, 5, 6, 5, 6],
-        'C' => [3, 4, 4, 4, 3],
-        'D' => [6, 5, 5, 5, 6],
-        'E' => [7, 4, 6, 4, 7],
-        'F' => [7, 4, 6, 4, 4],
-        'G' => [3, 4, 5, 5, 3],
-        'H' => [5, 5, 7, 5, 5],
-        'I' => [7, 2, 2, 2, 7],
-        'J' => [1, 1, 1, 5, 2],
-        'K' => [5, 5, 6, 5, 5],
-        'L' => [4, 4, 4, 4, 7],
-        'M' => [5, 7, 7, 5, 5],
-        'N' => [6, 5, 5, 5, 5],
-        'O' => [2, 5, 5, 5, 2],
-        'P' => [6, 5, 6, 4, 4],
-        'Q' => [2, 5, 5, 6, 3],
-        'R' => [6, 5, 6, 5, 5],
-        'S' => [3, 4, 2, 1, 6],
-        'T' => [7, 2, 2, 2, 2],
-        'U' => [5, 5, 5, 5, 7],
-        'V' => [5, 5, 5, 5, 2],
-        'W' => [5, 5, 7, 7, 5],
-        'X' => [5, 5, 2, 5, 5],
-        'Y' => [5, 5, 2, 2, 2],
-        'Z' => [7, 1, 2, 4, 7],
-        '0' => [7, 5, 5, 5, 7],
-        '1' => [2, 6, 2, 2, 7],
-        '2' => [6, 1, 2, 4, 7],
-        '3' => [6, 1, 2, 1, 6],
-        '4' => [5, 5, 7, 1, 1],
-        '5' => [7, 4, 6, 1, 6],
-        '6' => [3, 4, 7, 5, 7],
-        '7' => [7, 1, 2, 2, 2],
-        '8' => [7, 5, 7, 5, 7],
-        '9' => [7, 5, 7, 1, 6],
-        '-' => [0, 0, 7, 0, 0],
-        '.' => [0, 0, 0, 0, 2],
-        '_' => [0, 0, 0, 0, 7],
-        '/' => [1, 1, 2, 4, 4],
-        ':' => [0, 2, 0, 2, 0],
-        '(' => [1, 2, 2, 2, 1],
-        ')' => [4, 2, 2, 2, 4],
-        '=' => [0, 7, 0, 7, 0],
-        '+' => [0, 2, 7, 2, 0],
-        ',' => [0, 0, 0, 2, 4],
-        '%' => [5, 1, 2, 4, 5],
-        '<' => [1, 2, 4, 2, 1],
-        '>' => [4, 2, 1, 2, 4],
-        '*' => [0, 5, 2, 5, 0],
-        '^' => [2, 5, 0, 0, 0],
-        '²' => [6, 2, 4, 6, 0],
-        '−' => [0, 0, 7, 0, 0],
-        '×' => [0, 5, 2, 5, 0],
-        _ => [0; 5],
+use ab_glyph::{point, Font, FontRef, GlyphId, PxScale, ScaleFont};
+use std::sync::LazyLock;
+
+static FONT: LazyLock<FontRef<'static>> =
+    LazyLock::new(|| FontRef::try_from_slice(include_bytes!("../../assets/fonts/DejaVuSans.ttf")).expect("the embedded DejaVu Sans is a valid TrueType font"));
+
+/// Coverage (0 to 1) of one line of text over its box, `w × h` pixels row by row. The box is the
+/// font's ascent to descent at the size, so lines of one size have one height whatever letters
+/// they hold, and anchoring by the box centre centres every label alike.
+pub struct Mask {
+    pub w: u32,
+    pub h: u32,
+    pub coverage: Vec<f32>,
+}
+
+impl Mask {
+    fn at(&self, x: u32, y: u32) -> f32 {
+        self.coverage[(y * self.w + x) as usize]
     }
 }
 
-/// The pixels `text` covers at glyph scale `s` (each font pixel an s × s block, glyphs 4·s
-/// apart), as offsets from its top-left corner, glyph by glyph, row by row.
-pub fn pixels(text: &str, s: u32) -> impl Iterator<Item = (u32, u32)> + '_ {
-    text.chars().enumerate().flat_map(move |(k, c)| {
-        glyph(c).into_iter().enumerate().flat_map(move |(row, bits)| {
-            (0..3u32).filter(move |col| bits & (4 >> col) != 0).flat_map(move |col| {
-                (0..s).flat_map(move |sy| (0..s).map(move |sx| (k as u32 * 4 * s + col * s + sx, row as u32 * s + sy)))
-            })
-        })
-    })
+/// Glyphs of `text` at `size` pixels (ascent − descent) laid out on one line with kerning, the
+/// baseline on a whole pixel (sharper horizontals); and the box size.
+fn layout(text: &str, size: f32) -> (Vec<ab_glyph::Glyph>, u32, u32) {
+    let font = FONT.as_scaled(PxScale::from(size));
+    let baseline = font.ascent().round();
+    let (mut x, mut prev) = (0.0f32, None::<GlyphId>);
+    let mut glyphs = Vec::with_capacity(text.len());
+    for c in text.chars() {
+        let id = font.glyph_id(c);
+        if let Some(p) = prev {
+            x += font.kern(p, id);
+        }
+        glyphs.push(id.with_scale_and_position(size, point(x, baseline)));
+        x += font.h_advance(id);
+        prev = Some(id);
+    }
+    (glyphs, x.ceil().max(0.0) as u32, (baseline - font.descent()).ceil() as u32)
 }
 
-/// Draws `text` in white at (x, y) into an RGB8 buffer `width` pixels wide, scaled ×2.
-pub fn draw_text(px: &mut [u8], width: u32, x: u32, y: u32, text: &str) {
+/// Width and height of the box of `text` at `size` pixels.
+pub fn text_size(text: &str, size: f32) -> (u32, u32) {
+    let (_, w, h) = layout(text, size);
+    (w, h)
+}
+
+/// `text` rasterised at `size` pixels; ink outside the box (a glyph reaching left of its origin
+/// or right of its advance) is cut off, so that what is drawn is what was measured.
+pub fn mask(text: &str, size: f32) -> Mask {
+    let (glyphs, w, h) = layout(text, size);
+    let mut coverage = vec![0.0f32; (w * h) as usize];
+    for g in glyphs {
+        let Some(outline) = FONT.outline_glyph(g) else { continue };
+        let b = outline.px_bounds();
+        outline.draw(|gx, gy, c| {
+            let (x, y) = (b.min.x as i32 + gx as i32, b.min.y as i32 + gy as i32);
+            if x >= 0 && y >= 0 && (x as u32) < w && (y as u32) < h {
+                // Neighbouring glyphs can share an edge pixel: their coverages add up.
+                let v = &mut coverage[(y as u32 * w + x as u32) as usize];
+                *v = (*v + c).min(1.0);
+            }
+        });
+    }
+    Mask { w, h, coverage }
+}
+
+/// Largest size up to `size` at which `text` is at most `max_w` pixels wide, but not below
+/// 8 pixels, where DejaVu stops being legible: a longer label gets clipped instead.
+pub fn fitting_size(text: &str, size: f32, max_w: u32) -> f32 {
+    let w = text_size(text, size).0;
+    if w <= max_w {
+        return size;
+    }
+    // Widths scale with the size, up to rounding: step down from the proportional guess.
+    let mut s = (size * max_w as f32 / w as f32).floor().max(8.0);
+    while s > 8.0 && text_size(text, s).0 > max_w {
+        s -= 0.5;
+    }
+    s
+}
+
+/// Blends `rgb` at coverage `a` into pixel `o` (byte offset) of an RGB8 buffer.
+fn blend(px: &mut [u8], o: usize, rgb: [u8; 3], a: f32) {
+    for k in 0..3 {
+        px[o + k] = (px[o + k] as f32 * (1.0 - a) + rgb[k] as f32 * a).round() as u8;
+    }
+}
+
+/// Draws `text` in `rgb` at `size` pixels with the top-left of its box at (x, y) into an RGB8
+/// buffer `width` pixels wide, clipped to the buffer and to `max_w` pixels from x.
+pub fn draw(px: &mut [u8], width: u32, (x, y): (u32, u32), max_w: u32, size: f32, rgb: [u8; 3], text: &str) {
+    let m = mask(text, size);
     let height = px.len() as u32 / 3 / width.max(1);
-    for (gx, gy) in pixels(text, 2) {
-        let (xx, yy) = (x + gx, y + gy);
-        if xx < width && yy < height {
-            let o = ((yy * width + xx) * 3) as usize;
-            px[o..o + 3].copy_from_slice(&[255, 255, 255]);
+    for my in 0..m.h.min(height.saturating_sub(y)) {
+        for mx in 0..m.w.min(max_w).min(width.saturating_sub(x)) {
+            let a = m.at(mx, my);
+            if a > 0.0 {
+                blend(px, (((y + my) * width + x + mx) * 3) as usize, rgb, a);
+            }
         }
     }
+}
+
+/// A label in a bar above a tile `max_w` pixels wide: `size` pixels, smaller if it would not fit.
+pub fn label(px: &mut [u8], width: u32, at: (u32, u32), max_w: u32, size: f32, rgb: [u8; 3], text: &str) {
+    draw(px, width, at, max_w, fitting_size(text, size, max_w), rgb, text);
+}
+
+/// Height of the one-line label bar above each tile of a contact sheet.
+pub const BAR_H: u32 = 16;
+
+/// A white label in the bar above a tile `tile_w` pixels wide whose bar starts at (x, y).
+pub fn bar_label(px: &mut [u8], width: u32, (x, y): (u32, u32), tile_w: u32, text: &str) {
+    label(px, width, (x + 2, y + 2), tile_w.saturating_sub(3), 13.0, [255, 255, 255], text);
 }
 
 #[cfg(test)]
@@ -90,12 +123,33 @@ mod tests {
     use super::*;
 
     #[test]
-    fn pixels_are_the_set_bits_scaled_and_spaced() {
-        let t: Vec<_> = pixels("T", 1).collect();
-        assert_eq!(t, [(0, 0), (1, 0), (2, 0), (1, 1), (1, 2), (1, 3), (1, 4)]);
-        let tt: Vec<_> = pixels("TT", 2).collect();
-        assert_eq!(tt.len(), 2 * 7 * 4);
-        assert_eq!(&tt[..4], [(0, 0), (1, 0), (0, 1), (1, 1)]);
-        assert_eq!(tt[7 * 4], (8, 0));
+    fn boxes_grow_with_text_and_size_and_ink_stays_inside() {
+        let (w1, h1) = text_size("relMSE", 14.0);
+        let (w2, h2) = text_size("relMSE / 2-spp noisy", 14.0);
+        assert!(w2 > 2 * w1 && h1 == h2 && (14..=15).contains(&h1), "{w1}×{h1}, {w2}×{h2}");
+        let (w3, h3) = text_size("relMSE", 28.0);
+        assert!(w3.abs_diff(2 * w1) <= 2 && h3.abs_diff(2 * h1) <= 2, "{w3}×{h3}");
+        assert_eq!(text_size("", 14.0).0, 0);
+        // "g" has a descender and "É" an accent above the cap height: both stay in the box.
+        let m = mask("gÉ", 20.0);
+        let ink = |rows: std::ops::Range<u32>| rows.flat_map(|y| (0..m.w).map(move |x| (x, y))).map(|(x, y)| m.at(x, y)).sum::<f32>();
+        assert!(ink(0..m.h) > 20.0 && ink(m.h - 4..m.h) > 0.5 && ink(0..4) > 0.5);
+        assert!(m.coverage.iter().all(|c| (0.0..=1.0).contains(c)));
+    }
+
+    #[test]
+    fn labels_shrink_to_fit_down_to_the_legible_minimum() {
+        let t = "guided (half)";
+        let wide = text_size(t, 13.0).0;
+        assert_eq!(fitting_size(t, 13.0, wide), 13.0);
+        let s = fitting_size(t, 13.0, wide * 2 / 3);
+        assert!((8.0..13.0).contains(&s) && text_size(t, s).0 <= wide * 2 / 3, "{s}");
+        assert_eq!(fitting_size(t, 13.0, 5), 8.0);
+        // Drawing clips to the buffer and to max_w.
+        let (w, h) = (40u32, 10u32);
+        let mut px = vec![0u8; (w * h * 3) as usize];
+        draw(&mut px, w, (30, 2), 6, 14.0, [255, 255, 255], t);
+        let lit: Vec<u32> = (0..w * h).filter(|i| px[*i as usize * 3] > 0).map(|i| i % w).collect();
+        assert!(!lit.is_empty() && lit.iter().all(|&x| (30..36).contains(&x)));
     }
 }

@@ -2,7 +2,8 @@
 //! `<weights>.log.jsonl` files `pixguide train` writes, drawn against steps and against wall time,
 //! with a Markdown summary (best validation, where the curve flattens) on stdout.
 
-use super::eval_plot::{self, Canvas};
+use super::eval_plot::{self, Canvas, AXIS_SIZE, CAPTION_SIZE, TICK_SIZE};
+use super::font;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use plotters::coord::Shift;
@@ -258,7 +259,7 @@ fn panel(area: &DrawingArea<Canvas<'_>, Shift>, caption: &str, x_label: &str, ru
     let (y_keys, y_dec) = y_ticks(y0, y1);
     let x_dec = if x_max < 3.0 { 2 } else if x_max < 30.0 { 1 } else { 0 };
     let mut chart = ChartBuilder::on(area)
-        .caption(caption, ("sans-serif", 14))
+        .caption(caption, ("sans-serif", CAPTION_SIZE))
         .margin(12)
         .x_label_area_size(42)
         .y_label_area_size(70)
@@ -269,8 +270,8 @@ fn panel(area: &DrawingArea<Canvas<'_>, Shift>, caption: &str, x_label: &str, ru
         .x_desc(x_label)
         .y_desc("validation relMSE")
         .x_labels(8)
-        .label_style(("sans-serif", 12))
-        .axis_desc_style(("sans-serif", 14))
+        .label_style(("sans-serif", TICK_SIZE))
+        .axis_desc_style(("sans-serif", AXIS_SIZE))
         .max_light_lines(1)
         .x_label_formatter(&|v| num(*v, x_dec))
         .y_label_formatter(&|v| y_dec.map_or_else(|| short(*v), |d| format!("{v:.d$}")))
@@ -289,7 +290,9 @@ fn panel(area: &DrawingArea<Canvas<'_>, Shift>, caption: &str, x_label: &str, ru
 }
 
 const TITLE_H: u32 = 34;
-const NOTE_H: u32 = 16;
+const TITLE_SIZE: f32 = 22.0;
+const NOTE_H: u32 = 18;
+const NOTE_SIZE: f32 = 14.0;
 
 fn draw(path: &Path, title: &str, runs: &[(String, Run)]) -> Result<()> {
     let (w, plot_h) = (1100u32, 440u32);
@@ -311,11 +314,11 @@ fn draw(path: &Path, title: &str, runs: &[(String, Run)]) -> Result<()> {
         panel(&halves[0], "against training steps", "total steps", runs, |v| v.step as f64)?;
         panel(&halves[1], "against wall time", "wall-clock minutes", runs, |v| v.minutes)?;
     }
-    let title_w = title.chars().count() as u32 * 12;
-    eval_plot::text(&mut px, w, w.saturating_sub(title_w) / 2, 10, 3, [20, 20, 20], title);
+    let title_w = font::text_size(title, TITLE_SIZE).0;
+    font::draw(&mut px, w, (w.saturating_sub(title_w) / 2, 8), w, TITLE_SIZE, [20, 20, 20], title);
     eval_plot::draw_legend(&mut px, w, TITLE_H + plot_h, &entries);
     for (k, note) in notes.iter().enumerate() {
-        eval_plot::text(&mut px, w, 12, TITLE_H + plot_h + legend_h + k as u32 * NOTE_H + 2, 2, [90, 90, 90], note);
+        font::draw(&mut px, w, (12, TITLE_H + plot_h + legend_h + k as u32 * NOTE_H + 2), w, NOTE_SIZE, [90, 90, 90], note);
     }
     super::denoise::ensure_parent(path)?;
     renderer::film::png::write_rgb8(path, w, h, px)?;

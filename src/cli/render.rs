@@ -222,11 +222,11 @@ fn write_aovs(frame: &Frame, output: &Path, exposure: f32) -> Result<()> {
     Ok(())
 }
 
-/// Lays tiles out 4 per row, each under a label bar drawn with a tiny built-in font.
+/// Lays tiles out 4 per row, each under a label bar.
 fn contact_sheet(tiles: &[(&str, Vec<f32>)], w: u32, h: u32) -> (u32, u32, Vec<u8>) {
     let cols = 4u32.min(tiles.len() as u32).max(1);
     let rows = (tiles.len() as u32).div_ceil(cols);
-    let label_h = 12u32;
+    let label_h = super::font::BAR_H;
     let (sw, sh) = (cols * w, rows * (h + label_h));
     let mut px = vec![32u8; (sw * sh * 3) as usize];
     for (k, (name, rgb)) in tiles.iter().enumerate() {
@@ -237,7 +237,7 @@ fn contact_sheet(tiles: &[(&str, Vec<f32>)], w: u32, h: u32) -> (u32, u32, Vec<u
             let src = (y * w * 3) as usize;
             px[dst..dst + (w * 3) as usize].copy_from_slice(&rgb8[src..src + (w * 3) as usize]);
         }
-        super::font::draw_text(&mut px, sw, cx + 2, cy + 2, name);
+        super::font::bar_label(&mut px, sw, (cx, cy), w, name);
     }
     (sw, sh, px)
 }
