@@ -110,13 +110,13 @@ impl DenoiserConfig {
         c
     }
 
-    /// `edge` with the colour guides measured in units of the colour's noise
-    /// ([`EdgeStopping::FeaturesAndNoisyColourPooledTwoSided`]) instead of brighter-only log
-    /// differences. Weight files of the earlier forms (one-sided, 2026-11-25 afternoon; both
-    /// two-sided, evening) keep theirs: the variant is stored in each file's config.
+    /// `edge` with the colour guides measured in units of the colour's noise by a two-sided test
+    /// ([`EdgeStopping::FeaturesAndTwoSidedNoisyColour`]) instead of brighter-only log
+    /// differences. Weight files of the one-sided form (2026-11-25, afternoon) keep theirs: the
+    /// variant is stored in each file's config.
     pub fn edge_noise() -> Self {
         let mut c = Self::edge();
-        c.mskp = c.mskp.map(|m| m.with_edge_stopping(EdgeStopping::FeaturesAndNoisyColourPooledTwoSided));
+        c.mskp = c.mskp.map(|m| m.with_edge_stopping(EdgeStopping::FeaturesAndTwoSidedNoisyColour));
         c
     }
 
@@ -184,14 +184,11 @@ fn edge_guides(v: Variant, stopping: EdgeStopping) -> Vec<GuideGroup> {
         // mskp::pooled_variance). The pooled one starts at e^−3, where a jump of 3σ in every
         // channel keeps ~30 % of a tap's weight and one of 10σ none, so it acts from the first
         // step; the own one at e^−5, to be raised where the network finds it reliable.
-        EdgeStopping::FeaturesAndNoisyColour | EdgeStopping::FeaturesAndTwoSidedNoisyColour | EdgeStopping::FeaturesAndNoisyColourPooledTwoSided => {
+        EdgeStopping::FeaturesAndNoisyColour | EdgeStopping::FeaturesAndTwoSidedNoisyColour => {
             let mut own = GuideGroup::new(0, 3, 1.0, false).with_variance(3).with_init_log_strength(-5.0);
             let mut pooled = GuideGroup::new(0, 3, 1.0, false).with_pooled_variance(3).with_init_log_strength(-3.0);
             if stopping == EdgeStopping::FeaturesAndTwoSidedNoisyColour {
-                own = own.two_sided();
-            }
-            if stopping != EdgeStopping::FeaturesAndNoisyColour {
-                pooled = pooled.two_sided();
+                (own, pooled) = (own.two_sided(), pooled.two_sided());
             }
             return [own, pooled].into_iter().chain(edge_guides(v, EdgeStopping::Features)).collect();
         }

@@ -24,14 +24,11 @@ pub enum EdgeStopping {
     /// difference stops the kernel, which tends to the identity on a converged input.
     FeaturesAndNoisyColour,
     /// As `FeaturesAndNoisyColour`, both colour guides with the two-sided test of
-    /// [`GuideGroup::two_sided`] (2026-11-25, evening: sparse 2-spp images kept their
-    /// brightness, but fireflies and thin features passed at 32–64 spp).
+    /// [`GuideGroup::two_sided`]: the `edge-noise` preset since 2026-11-25, evening. Sparse 2-spp
+    /// images keep their brightness; the price is paid at 32–64 spp, where a firefly or a thin
+    /// feature's difference is about its own variance and passes (docs/denoiser.md, "The
+    /// two-sided noise test").
     FeaturesAndTwoSidedNoisyColour,
-    /// The pixel's own variance one-sided (it stops a firefly: a single outlier sample's
-    /// difference is about its own variance, which the two-sided test would call noise) and the
-    /// pooled one two-sided (it lets a lit sample and a black pixel of a sparse image average):
-    /// the network weighs the two per pixel.
-    FeaturesAndNoisyColourPooledTwoSided,
 }
 
 /// Input channels `start..start + len` used as an edge-stopping guide, multiplied by `scale`

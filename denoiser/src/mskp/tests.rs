@@ -298,8 +298,8 @@ fn two_sided_noise_test_keeps_the_brightness_of_a_sparse_2spp_image() {
 /// Δ = S/64 and its variance of the mean is about Δ². Its neighbours (0.5, variance 10⁻⁶) must
 /// not take it in: the one-sided test explains only what the neighbour's own noise adds
 /// (2·10⁻⁶), so at strength e^3 they keep their value; the two-sided test calls the same
-/// difference noise (Δ² < 2(v_p + v_q)) and lets it in. That is why the `edge-noise` preset keeps
-/// the pixel's own variance one-sided and makes only the pooled guide two-sided.
+/// difference noise (Δ² < 2(v_p + v_q)) and lets it in: the price of the two-sided test, paid on
+/// glass-still-life's caustics at 32–64 spp (docs/denoiser.md, "The two-sided noise test").
 #[test]
 fn one_sided_own_variance_guide_keeps_a_firefly_out_of_its_neighbours() {
     let d = cpu_device();
