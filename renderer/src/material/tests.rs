@@ -3,106 +3,8 @@
 
 use super::*;
 use crate::rng::Pcg32;
+use crate::stats::{chi2_p_value, sidak};
 use std::f64::consts::PI as PI64;
-
-// ---------------------------------------------------------------------------------------------
-// Regularised incomplete gamma function (for chi-square p-values).
-
-/// ln Γ(x) for x > 0 (Lanczos, g = 7, 9 terms; ~1e-15 relative).
-fn ln_gamma(x: f64) -> f64 {
-    const C: [f64; 9] = [
-        0.999_999_999_999_809_9,
-        676.520_368_121_885_1,
-        -1_259.139_216_722_402_8,
-        771.323_428_777_653_1,
-        -176.615_029_162_140_6,
-        12.507_343_278_686_905,
-        -0.138_571_095_265_720_12,
-        9.984_369_578_019_572e-6,
-        1.505_632_735_149_311_6e-7,
-    ];
-    if x < 0.5 {
-        // Reflection formula keeps the series in its accurate range.
-        return (PI64 / (PI64 * x).sin()).ln() - ln_gamma(1.0 - x);
-    }
-    let x = x - 1.0;
-    let mut a = C[0];
-    let t = x + 7.5;
-    for (i, c) in C.iter().enumerate().skip(1) {
-        a += c / (x + i as f64);
-    }
-    0.5 * (2.0 * PI64).ln() + (x + 0.5) * t.ln() - t + a.ln()
-}
-
-/// Q(a, x) = Γ(a, x)/Γ(a): series for x < a + 1, Lentz continued fraction otherwise.
-fn gamma_q(a: f64, x: f64) -> f64 {
-    if x <= 0.0 {
-        return 1.0;
-    }
-    let ln_pre = a * x.ln() - x - ln_gamma(a);
-    if x < a + 1.0 {
-        let (mut ap, mut sum, mut del) = (a, 1.0 / a, 1.0 / a);
-        for _ in 0..10_000 {
-            ap += 1.0;
-            del *= x / ap;
-            sum += del;
-            if del.abs() < sum.abs() * 1e-15 {
-                break;
-            }
-        }
-        (1.0 - sum * ln_pre.exp()).clamp(0.0, 1.0)
-    } else {
-        let tiny = 1e-300;
-        let mut b = x + 1.0 - a;
-        let mut c = 1.0 / tiny;
-        let mut d = 1.0 / b;
-        let mut h = d;
-        for i in 1..10_000 {
-            let an = -(i as f64) * (i as f64 - a);
-            b += 2.0;
-            d = an * d + b;
-            if d.abs() < tiny {
-                d = tiny;
-            }
-            c = b + an / c;
-            if c.abs() < tiny {
-                c = tiny;
-            }
-            d = 1.0 / d;
-            let del = d * c;
-            h *= del;
-            if (del - 1.0).abs() < 1e-15 {
-                break;
-            }
-        }
-        (ln_pre.exp() * h).clamp(0.0, 1.0)
-    }
-}
-
-/// Upper-tail probability of a chi-square statistic with `dof` degrees of freedom.
-fn chi2_p_value(stat: f64, dof: usize) -> f64 {
-    gamma_q(dof as f64 / 2.0, stat / 2.0)
-}
-
-#[test]
-fn chi2_p_values_match_tables() {
-    // Critical values from standard chi-square tables (5 significant digits), and the closed
-    // form exp(−x/2) for 2 dof; 1e-4 is the precision of the tabulated values.
-    let cases = [
-        (3.8415, 1, 0.05),
-        (6.6349, 1, 0.01),
-        (23.209, 10, 0.01),
-        (18.307, 10, 0.05),
-        (76.154, 50, 0.01),
-        (4.0, 2, (-2.0f64).exp()),
-        (0.5, 7, 0.99948),
-        (135.81, 100, 0.01),
-    ];
-    for (x, dof, p) in cases {
-        let got = chi2_p_value(x, dof);
-        assert!((got - p).abs() < 1e-4, "chi2 Q({x}, {dof}) = {got}, table {p}");
-    }
-}
 
 // ---------------------------------------------------------------------------------------------
 // Test configurations.
@@ -349,8 +251,7 @@ fn chi2_run(cfg: &Config, seed: u64) -> (f64, String) {
 fn chi2_group(group: &str) {
     // Šidák: per-configuration level so the whole family of tests rejects a correct sampler
     // with probability 0.01.
-    let m = chi2_total_configs() as f64;
-    let alpha = 1.0 - (1.0 - 0.01f64).powf(1.0 / m);
+    let alpha = sidak(0.01, chi2_total_configs());
     let mut failures = Vec::new();
     for (idx, cfg) in chi2_configs(group).iter().enumerate() {
         let t0 = std::time::Instant::now();
