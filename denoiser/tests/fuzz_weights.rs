@@ -9,7 +9,6 @@ mod fuzz_support;
 
 use fuzz_support::*;
 use proptest::prelude::*;
-use proptest::test_runner::TestRunner;
 use std::path::PathBuf;
 
 #[global_allocator]
@@ -46,16 +45,10 @@ fn mutated_weight_files_load_or_fail_cleanly() {
     let sources = sources();
     let originals: Vec<Vec<u8>> = sources.iter().map(|s| std::fs::read(s).unwrap()).collect();
     let case = dir.join("case.safetensors");
-    let tally = Tally::default();
-    let mut runner = TestRunner::new(config(64, 31));
-    let result = runner.run(&mutated(sources.len()), |(i, edits)| {
+    run_cases("weights", 64, 31, Inputs::Mutated, &mutated(sources.len()), |tally, (i, edits)| {
         std::fs::write(&case, apply_all(&originals[i], &edits)).unwrap();
-        guarded(&tally, label(&sources[i], &edits), { let p = case.clone(); move || load(p) })
+        guarded(tally, label(&sources[i], &edits), { let p = case.clone(); move || load(p) })
     });
-    if let Err(e) = result {
-        panic!("weights: {e}");
-    }
-    tally.check("weights");
 }
 
 #[test]
@@ -64,17 +57,11 @@ fn weight_files_with_mutated_headers_load_or_fail_cleanly() {
     let sources = sources();
     let parts: Vec<(Vec<u8>, Vec<u8>)> = sources.iter().map(|s| split(&std::fs::read(s).unwrap())).collect();
     let case = dir.join("case.safetensors");
-    let tally = Tally::default();
-    let mut runner = TestRunner::new(config(160, 32));
-    let result = runner.run(&mutated(sources.len()), |(i, edits)| {
+    run_cases("weights (header)", 160, 32, Inputs::Mutated, &mutated(sources.len()), |tally, (i, edits)| {
         let (header, data) = &parts[i];
         std::fs::write(&case, frame(&apply_all(header, &edits), data)).unwrap();
-        guarded(&tally, format!("header of {}", label(&sources[i], &edits)), { let p = case.clone(); move || load(p) })
+        guarded(tally, format!("header of {}", label(&sources[i], &edits)), { let p = case.clone(); move || load(p) })
     });
-    if let Err(e) = result {
-        panic!("weights (header): {e}");
-    }
-    tally.check("weights (header)");
 }
 
 /// The metadata values themselves mutated (the configuration's JSON above all), the header
@@ -93,23 +80,17 @@ fn weight_files_with_mutated_metadata_load_or_fail_cleanly() {
         .collect();
     const KEYS: &[&str] = &["pixguide.config", "pixguide.config", "pixguide.config", "pixguide.provenance", "pixguide.method", "pixguide.format"];
     let case = dir.join("case.safetensors");
-    let tally = Tally::default();
-    let mut runner = TestRunner::new(config(192, 34));
-    let result = runner.run(&(mutated(sources.len()), prop::sample::select(KEYS)), |((i, edits), key)| {
+    run_cases("weights (metadata)", 192, 34, Inputs::Mutated, &(mutated(sources.len()), prop::sample::select(KEYS)), |tally, ((i, edits), key)| {
         let (header, data) = &parts[i];
         let mut header = header.clone();
         let value = header["__metadata__"][key].as_str().unwrap().as_bytes().to_vec();
         header["__metadata__"][key] = serde_json::Value::String(String::from_utf8_lossy(&apply_all(&value, &edits)).into_owned());
         std::fs::write(&case, frame(&serde_json::to_vec(&header).unwrap(), data)).unwrap();
-        guarded(&tally, format!("{key} of {}", label(&sources[i], &edits)), {
+        guarded(tally, format!("{key} of {}", label(&sources[i], &edits)), {
             let p = case.clone();
             move || load(p)
         })
     });
-    if let Err(e) = result {
-        panic!("weights (metadata): {e}");
-    }
-    tally.check("weights (metadata)");
 }
 
 const TOKENS: &[&str] = &[
@@ -122,14 +103,9 @@ const TOKENS: &[&str] = &[
 fn arbitrary_weight_headers_fail_cleanly() {
     let dir = scratch("weights_soup");
     let case = dir.join("case.safetensors");
-    let tally = Tally::default();
-    let mut runner = TestRunner::new(config(128, 33));
-    let result = runner.run(&(token_soup(TOKENS, 64), prop::collection::vec(any::<u8>(), 0..64)), |(header, data)| {
+    let input = (token_soup(TOKENS, 64), prop::collection::vec(any::<u8>(), 0..64));
+    run_cases("weights (arbitrary)", 128, 33, Inputs::Arbitrary, &input, |tally, (header, data)| {
         std::fs::write(&case, frame(&header, &data)).unwrap();
-        guarded(&tally, format!("header {:?}", String::from_utf8_lossy(&header)), { let p = case.clone(); move || load(p) })
+        guarded(tally, format!("header {:?}", String::from_utf8_lossy(&header)), { let p = case.clone(); move || load(p) })
     });
-    if let Err(e) = result {
-        panic!("weights (arbitrary): {e}");
-    }
-    tally.report("weights (arbitrary)");
 }

@@ -21,6 +21,7 @@ pub mod rng;
 pub mod sampling;
 pub mod scene;
 pub mod sky;
+pub mod stats;
 pub mod texture;
 
 pub use error::{Error, Result};

@@ -9,7 +9,6 @@ mod fuzz_support;
 use fuzz_support::*;
 use proptest::prelude::*;
 use proptest::sample::Index;
-use proptest::test_runner::TestRunner;
 use renderer::film::{exr_io, Frame, PixelBuffer};
 use renderer::scene::image_io;
 use exr::prelude::{read, Blocks, Compression, Encoding, LineOrder, ReadChannels, ReadLayers, Vec2, WritableImage};
@@ -89,26 +88,18 @@ fn fuzz(name: &str, cases: u32, salt: u64, sources: Vec<PathBuf>, read: fn(&Path
         assert!(read(&p), "the source {} does not read", s.display());
     }
     let case = dir.join("case.exr");
-    let tally = Tally::default();
-    let mut runner = TestRunner::new(config(cases, salt));
-    let result = runner.run(&mutated(sources.len()), |(i, edits)| {
+    run_cases(name, cases, salt, Inputs::Mutated, &mutated(sources.len()), |tally, (i, edits)| {
         std::fs::write(&case, apply_all(&originals[i], &edits)).unwrap();
         let p = case.clone();
-        guarded(&tally, label(&sources[i], &edits), move || if read(&p) { Ok(()) } else { Err(()) })
+        guarded(tally, label(&sources[i], &edits), move || if read(&p) { Ok(()) } else { Err(()) })
     });
-    if let Err(e) = result {
-        panic!("{name}: {e}");
-    }
-    tally.check(name);
 
     // Hostile values written into the header's attributes themselves (the data window, the
     // channel list, compression, tiles, chunk count), which random positions rarely hit.
-    let tally = Tally::default();
-    let mut runner = TestRunner::new(config(cases, salt ^ 0x5A));
     // Half of the edits go to the data window, whose size every allocation follows; one or two
     // words, so that both sides can grow at once.
     let edit = (0..sources.len(), any::<bool>(), any::<Index>(), any::<Index>(), 1..=2usize, prop::sample::select(HOSTILE_I32));
-    let result = runner.run(&edit, |(i, window, attr, word, words, value)| {
+    run_cases(&format!("{name} (header attributes)"), cases, salt ^ 0x5A, Inputs::Mutated, &edit, |tally, (i, window, attr, word, words, value)| {
         let mut b = originals[i].clone();
         let attrs = attributes(&b);
         let pick = if window { attrs.iter().position(|(n, _, _)| n == "dataWindow").unwrap() } else { attr.index(attrs.len()) };
@@ -121,28 +112,18 @@ fn fuzz(name: &str, cases: u32, salt: u64, sources: Vec<PathBuf>, read: fn(&Path
         }
         std::fs::write(&case, &b).unwrap();
         let p = case.clone();
-        guarded(&tally, format!("{} with {words}× {value} in {attr_name} at byte {at}", sources[i].display()), move || if read(&p) { Ok(()) } else { Err(()) })
+        guarded(tally, format!("{} with {words}× {value} in {attr_name} at byte {at}", sources[i].display()), move || if read(&p) { Ok(()) } else { Err(()) })
     });
-    if let Err(e) = result {
-        panic!("{name} (header attributes): {e}");
-    }
-    tally.check(&format!("{name} (header attributes)"));
     // Arbitrary bytes behind the magic number and a version word, so they reach the header parser.
-    let tally = Tally::default();
-    let mut runner = TestRunner::new(config(cases / 2, salt ^ 0xA5));
     let soup = (prop::sample::select(&[2u32, 0x202, 0x402, 0x802, 0x1002][..]), prop::collection::vec(any::<u8>(), 0..2048));
-    let result = runner.run(&soup, |(version, bytes)| {
+    run_cases(&format!("{name} (arbitrary)"), cases / 2, salt ^ 0xA5, Inputs::Arbitrary, &soup, |tally, (version, bytes)| {
         let mut b = vec![0x76, 0x2f, 0x31, 0x01];
         b.extend_from_slice(&version.to_le_bytes());
         b.extend_from_slice(&bytes);
         std::fs::write(&case, &b).unwrap();
         let p = case.clone();
-        guarded(&tally, format!("{name}: version {version:#x}, {} arbitrary bytes", bytes.len()), move || if read(&p) { Ok(()) } else { Err(()) })
+        guarded(tally, format!("{name}: version {version:#x}, {} arbitrary bytes", bytes.len()), move || if read(&p) { Ok(()) } else { Err(()) })
     });
-    if let Err(e) = result {
-        panic!("{name} (arbitrary): {e}");
-    }
-    tally.report(&format!("{name} (arbitrary)"));
 }
 
 const HOSTILE_I32: &[i32] = &[0, 1, -1, 2, 3, 15, 16, 99_999, 1_000_000, 16_383, 16_384, 65_535, 0x3fff_fffe, i32::MAX, i32::MIN, -99_999];

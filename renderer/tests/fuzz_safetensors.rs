@@ -8,7 +8,6 @@ mod fuzz_support;
 
 use fuzz_support::*;
 use proptest::prelude::*;
-use proptest::test_runner::TestRunner;
 use renderer::film::descriptors::Descriptors;
 
 #[global_allocator]
@@ -25,39 +24,28 @@ fn mutated_descriptor_files_read_or_fail_cleanly() {
     let original = std::fs::read(&src).unwrap();
     let case = dir.join("case.safetensors");
 
-    let tally = Tally::default();
-    let mut runner = TestRunner::new(config(256, 21));
-    let result = runner.run(&mutated(1), |(_, edits)| {
+    run_cases("descriptors", 256, 21, Inputs::Mutated, &mutated(1), |tally, (_, edits)| {
         std::fs::write(&case, apply_all(&original, &edits)).unwrap();
         let p = case.clone();
-        guarded(&tally, label(&src, &edits), move || Descriptors::read_safetensors(&p))
+        guarded(tally, label(&src, &edits), move || Descriptors::read_safetensors(&p))
     });
-    if let Err(e) = result {
-        panic!("descriptors: {e}");
-    }
-    tally.check("descriptors");
 
     // A header of arbitrary text under a length that may or may not match it.
     let header = prop_oneof![
         prop::collection::vec(any::<u8>(), 0..512),
         token_soup(SAFETENSORS_TOKENS, 48),
     ];
-    let tally = Tally::default();
-    let mut runner = TestRunner::new(config(128, 22));
-    let result = runner.run(&(header, any::<bool>(), any::<u64>(), prop::collection::vec(any::<u8>(), 0..256)), |(h, honest, len, data)| {
+    let input = (header, any::<bool>(), any::<u64>(), prop::collection::vec(any::<u8>(), 0..256));
+    run_cases("descriptors (arbitrary)", 128, 22, Inputs::Arbitrary, &input, |tally, (h, honest, len, data)| {
         let mut b = if honest { (h.len() as u64).to_le_bytes().to_vec() } else { len.to_le_bytes().to_vec() };
         b.extend_from_slice(&h);
         b.extend_from_slice(&data);
         std::fs::write(&case, &b).unwrap();
         let p = case.clone();
-        guarded(&tally, format!("header {:?} (length {}), {} data bytes", String::from_utf8_lossy(&h), if honest { h.len() as u64 } else { len }, data.len()), move || {
+        guarded(tally, format!("header {:?} (length {}), {} data bytes", String::from_utf8_lossy(&h), if honest { h.len() as u64 } else { len }, data.len()), move || {
             Descriptors::read_safetensors(&p)
         })
     });
-    if let Err(e) = result {
-        panic!("descriptors (arbitrary): {e}");
-    }
-    tally.report("descriptors (arbitrary)");
 }
 
 const SAFETENSORS_TOKENS: &[&str] = &[

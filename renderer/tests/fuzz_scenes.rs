@@ -6,7 +6,6 @@
 mod fuzz_support;
 
 use fuzz_support::*;
-use proptest::test_runner::TestRunner;
 use renderer::scene::Scene;
 use std::path::{Path, PathBuf};
 
@@ -46,33 +45,21 @@ fn fuzz_files(
     load_path: impl Fn(usize) -> PathBuf,
 ) {
     let originals: Vec<Vec<u8>> = sources.iter().map(|(s, _)| std::fs::read(s).unwrap()).collect();
-    let tally = Tally::default();
-    let mut runner = TestRunner::new(config(cases, salt));
-    let result = runner.run(&mutated(sources.len()), |(i, edits)| {
+    run_cases(name, cases, salt, Inputs::Mutated, &mutated(sources.len()), |tally, (i, edits)| {
         let (source, target) = &sources[i];
         std::fs::write(target, apply_all(&originals[i], &edits)).unwrap();
         let path = load_path(i);
-        guarded(&tally, label(source, &edits), move || Scene::load(&path))
+        guarded(tally, label(source, &edits), move || Scene::load(&path))
     });
-    if let Err(e) = result {
-        panic!("{name}: {e}");
-    }
-    tally.check(name);
 }
 
 /// Arbitrary token soup written to `path` and loaded.
 fn fuzz_soup(name: &str, cases: u32, salt: u64, tokens: &'static [&'static str], path: PathBuf) {
-    let tally = Tally::default();
-    let mut runner = TestRunner::new(config(cases, salt));
-    let result = runner.run(&token_soup(tokens, 96), |bytes| {
+    run_cases(name, cases, salt, Inputs::Arbitrary, &token_soup(tokens, 96), |tally, bytes| {
         std::fs::write(&path, &bytes).unwrap();
         let p = path.clone();
-        guarded(&tally, format!("{} = {:?}", path.display(), String::from_utf8_lossy(&bytes)), move || Scene::load(&p))
+        guarded(tally, format!("{} = {:?}", path.display(), String::from_utf8_lossy(&bytes)), move || Scene::load(&p))
     });
-    if let Err(e) = result {
-        panic!("{name}: {e}");
-    }
-    tally.report(name);
 }
 
 /// Every TOML scene shipped under scenes/.
@@ -179,17 +166,11 @@ fn arbitrary_obj_fails_cleanly() {
     std::fs::write(dir.join("scene.toml"), "[camera]\nposition = [0, 0, 4]\ntarget = [0, 0, 0]\nresolution = [8, 8]\n[[shapes]]\ntype = \"obj\"\nfile = \"mesh.obj\"\n").unwrap();
     let mesh = dir.join("mesh.obj");
     let scene = dir.join("scene.toml");
-    let tally = Tally::default();
-    let mut runner = TestRunner::new(config(256, 4));
-    let result = runner.run(&token_soup(OBJ_TOKENS, 128), |bytes| {
+    run_cases("obj soup", 256, 4, Inputs::Arbitrary, &token_soup(OBJ_TOKENS, 128), |tally, bytes| {
         std::fs::write(&mesh, &bytes).unwrap();
         let p = scene.clone();
-        guarded(&tally, format!("mesh.obj = {:?}", String::from_utf8_lossy(&bytes)), move || Scene::load(&p))
+        guarded(tally, format!("mesh.obj = {:?}", String::from_utf8_lossy(&bytes)), move || Scene::load(&p))
     });
-    if let Err(e) = result {
-        panic!("obj soup: {e}");
-    }
-    tally.report("obj soup");
 }
 
 fn base64(data: &[u8]) -> String {
@@ -292,18 +273,12 @@ fn mutated_gltf_and_glb_load_or_fail_cleanly() {
             panic!("the glTF source {name} does not load: {e}");
         }
     }
-    let tally = Tally::default();
-    let mut runner = TestRunner::new(config(256, 5));
-    let result = runner.run(&mutated(sources.len()), |(i, edits)| {
+    run_cases("gltf", 256, 5, Inputs::Mutated, &mutated(sources.len()), |tally, (i, edits)| {
         let (name, bytes) = &sources[i];
         let p = dir.join(format!("case-{name}"));
         std::fs::write(&p, apply_all(bytes, &edits)).unwrap();
-        guarded(&tally, label(Path::new(name), &edits), move || Scene::load(&p))
+        guarded(tally, label(Path::new(name), &edits), move || Scene::load(&p))
     });
-    if let Err(e) = result {
-        panic!("gltf: {e}");
-    }
-    tally.check("gltf");
 }
 
 const GLTF_TOKENS: &[&str] = &[

@@ -1,4 +1,4 @@
-//! The Mitsuba XML loader (renderer/src/scene/mitsuba.rs) on the shipped "Veach, Ajar" scene
+//! The Mitsuba XML loader (renderer/src/scene/mitsuba/) on the shipped "Veach, Ajar" scene
 //! and on small hand-written scenes, including the errors for what it does not read.
 
 mod common;

@@ -23,6 +23,7 @@
 use renderer::film::BufferRequest;
 use renderer::integrator::{self, RenderOptions};
 use renderer::scene::{export_mitsuba, Scene};
+use renderer::stats::{sidak, t_threshold, t_two_sided_p};
 use tools_venv::{mitsuba_python, MITSUBA};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -116,104 +117,6 @@ fn write_image(img: &Image, path: &Path, spp: u32, seeds: u32) {
 }
 
 // ---- Statistics -------------------------------------------------------------------------
-
-/// ln Γ(x), x > 0 (Lanczos, g = 7, 9 terms; |error| < 1e-13 here).
-fn ln_gamma(x: f64) -> f64 {
-    const C: [f64; 9] = [
-        0.999_999_999_999_809_9,
-        676.520_368_121_885_1,
-        -1_259.139_216_722_402_8,
-        771.323_428_777_653_1,
-        -176.615_029_162_140_6,
-        12.507_343_278_686_905,
-        -0.138_571_095_265_720_12,
-        9.984_369_578_019_572e-6,
-        1.505_632_735_149_311_6e-7,
-    ];
-    if x < 0.5 {
-        return (std::f64::consts::PI / (std::f64::consts::PI * x).sin()).ln() - ln_gamma(1.0 - x);
-    }
-    let x = x - 1.0;
-    let t = x + 7.5;
-    let s: f64 = C[0] + (1..9).map(|i| C[i] / (x + i as f64)).sum::<f64>();
-    0.5 * (2.0 * std::f64::consts::PI).ln() + (x + 0.5) * t.ln() - t + s.ln()
-}
-
-/// Regularised incomplete beta I_x(a, b) (continued fraction, Numerical Recipes' betacf).
-fn inc_beta(a: f64, b: f64, x: f64) -> f64 {
-    if x <= 0.0 {
-        return 0.0;
-    }
-    if x >= 1.0 {
-        return 1.0;
-    }
-    let front = (ln_gamma(a + b) - ln_gamma(a) - ln_gamma(b) + a * x.ln() + b * (1.0 - x).ln()).exp();
-    let cf = |a: f64, b: f64, x: f64| {
-        let tiny = 1e-300;
-        let (qab, qap, qam) = (a + b, a + 1.0, a - 1.0);
-        let mut c = 1.0;
-        let mut d = 1.0 - qab * x / qap;
-        d = if d.abs() < tiny { tiny } else { d };
-        d = 1.0 / d;
-        let mut h = d;
-        for m in 1..500 {
-            let m = m as f64;
-            let m2 = 2.0 * m;
-            let aa = m * (b - m) * x / ((qam + m2) * (a + m2));
-            d = 1.0 + aa * d;
-            d = if d.abs() < tiny { tiny } else { d };
-            c = 1.0 + aa / c;
-            c = if c.abs() < tiny { tiny } else { c };
-            d = 1.0 / d;
-            h *= d * c;
-            let aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
-            d = 1.0 + aa * d;
-            d = if d.abs() < tiny { tiny } else { d };
-            c = 1.0 + aa / c;
-            c = if c.abs() < tiny { tiny } else { c };
-            d = 1.0 / d;
-            let del = d * c;
-            h *= del;
-            if (del - 1.0).abs() < 1e-15 {
-                break;
-            }
-        }
-        h
-    };
-    if x < (a + 1.0) / (a + b + 2.0) {
-        front * cf(a, b, x) / a
-    } else {
-        1.0 - front * cf(b, a, 1.0 - x) / b
-    }
-}
-
-/// Two-sided p-value of Student's t with `dof` degrees of freedom: P(|T| ≥ |t|).
-fn t_two_sided_p(t: f64, dof: f64) -> f64 {
-    if !t.is_finite() {
-        return 0.0;
-    }
-    inc_beta(dof / 2.0, 0.5, dof / (dof + t * t))
-}
-
-/// The smallest |t| (for `dof`) whose two-sided p-value is below `p`, by bisection.
-fn t_threshold(p: f64, dof: f64) -> f64 {
-    let (mut lo, mut hi) = (0.0f64, 1e3f64);
-    for _ in 0..200 {
-        let mid = 0.5 * (lo + hi);
-        if t_two_sided_p(mid, dof) > p {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    hi
-}
-
-/// Šidák's per-test significance for a family of `n` tests at family-wise `alpha`.
-fn sidak(alpha: f64, n: usize) -> f64 {
-    // 1 − (1 − α)^(1/n) without cancellation.
-    -((-alpha).ln_1p() / n as f64).exp_m1()
-}
 
 /// One Welch test: the two means of a cell (a pixel, a block, the image) and their variances.
 #[derive(Clone, Copy, Debug)]
@@ -445,16 +348,4 @@ fn matches_mitsuba_pixel_by_pixel() {
     }
     std::fs::write(out_dir.join("report.txt"), &all).unwrap();
     assert!(failures.is_empty(), "our renders disagree with Mitsuba's:\n{}", failures.join("\n"));
-}
-
-#[test]
-fn statistics_helpers_are_right() {
-    // Standard normal limit and known t quantiles.
-    assert!((t_two_sided_p(1.959964, 1e7) - 0.05).abs() < 1e-5);
-    assert!((t_two_sided_p(2.228139, 10.0) - 0.05).abs() < 1e-5);
-    assert!((t_two_sided_p(12.7062, 1.0) - 0.05).abs() < 1e-4);
-    assert!((t_threshold(0.01, 30.0) - 2.749996).abs() < 1e-4);
-    assert!((t_threshold(1e-6, 1e7) - 4.891638).abs() < 1e-3);
-    assert!((sidak(0.05, 1) - 0.05).abs() < 1e-12);
-    assert!((sidak(0.01, 100) - (1.0 - 0.99f64.powf(0.01))).abs() < 1e-15);
 }

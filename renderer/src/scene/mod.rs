@@ -148,7 +148,7 @@ impl Scene {
 }
 
 /// Dispatches on the file extension to a loader: `.toml` (our format, docs/scene-format.md),
-/// `.gltf`/`.glb`, `.xml` (Mitsuba, `mitsuba.rs`).
+/// `.gltf`/`.glb`, `.xml` (Mitsuba, `mitsuba/`).
 pub fn load_description(path: &Path) -> Result<SceneDescription> {
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     match ext.as_deref() {

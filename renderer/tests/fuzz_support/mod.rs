@@ -14,7 +14,7 @@
 
 use proptest::prelude::*;
 use proptest::sample::Index;
-use proptest::test_runner::{Config, RngSeed};
+use proptest::test_runner::{Config, RngSeed, TestRunner};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::RefCell;
 use std::io::Write;
@@ -161,6 +161,30 @@ pub fn config(cases: u32, salt: u64) -> Config {
         max_shrink_iters: 256,
         max_shrink_time: 120_000,
         ..Config::default()
+    }
+}
+
+/// What the cases of a run are, which decides what its tally must show.
+#[derive(Clone, Copy, Debug)]
+pub enum Inputs {
+    /// Mutated copies of files the reader accepts: both answers must occur ([`Tally::check`]).
+    Mutated,
+    /// Arbitrary inputs, which may all be refused ([`Tally::report`]).
+    Arbitrary,
+}
+
+/// One proptest run over `strategy` with [`config`]`(cases, salt)`: `case` gets each value and
+/// the run's tally (for [`guarded`]). A failing case panics with `name` and proptest's shrunk
+/// input; afterwards the tally is checked or reported, as `inputs` says.
+pub fn run_cases<S: Strategy>(name: &str, cases: u32, salt: u64, inputs: Inputs, strategy: &S, case: impl Fn(&Tally, S::Value) -> Result<(), TestCaseError>) {
+    let tally = Tally::default();
+    let mut runner = TestRunner::new(config(cases, salt));
+    if let Err(e) = runner.run(strategy, |value| case(&tally, value)) {
+        panic!("{name}: {e}");
+    }
+    match inputs {
+        Inputs::Mutated => tally.check(name),
+        Inputs::Arbitrary => tally.report(name),
     }
 }
 
