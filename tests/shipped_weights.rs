@@ -96,7 +96,7 @@ fn shipped_edge_noise_guided_model_beats_the_noisy_render() {
 /// veach-ajar at 2 spp: 83 % of the pixels saw no light in either sample. The one-sided colour
 /// test of the 2026-11-25 afternoon models left the denoised image at 0.54 of the reference's
 /// brightness (median over pixels of the luminance ratio; the noisy render's mean is at 0.98);
-/// the two-sided test's g gives 0.86 and guided 0.8x (docs/denoiser.md, "The two-sided noise
+/// the two-sided test's g gives 0.86 and guided 0.85 (docs/denoiser.md, "The two-sided noise
 /// test"). The bar of 0.75 sits between: a model that darkens sparse images again fails.
 #[test]
 fn shipped_edge_noise_models_keep_a_sparse_2spp_image_bright() {
