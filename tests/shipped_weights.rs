@@ -14,29 +14,37 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// Renders the cornell-box test scene at its reference size and 8 spp, denoises it with the
-/// shipped model `<stem>.safetensors` (a `method` model) and returns ((noisy, denoised) relMSE, (noisy, denoised) 1−SSIM),
-/// tone map (a), no border.
-fn errors(stem: &str, method: Method) -> ((f64, f64), (f64, f64)) {
+/// Renders test scene `scene` (path under scenes/) at its reference's size, `spp` and seed 4242,
+/// denoises it with the shipped `<stem>.safetensors` (a `method` model) and returns the noisy
+/// frame, the denoised radiance and the reference.
+fn render_and_denoise(scene: &str, reference: &str, spp: u32, stem: &str, method: Method) -> (renderer::film::Frame, Vec<f32>, renderer::film::Frame) {
     let weights = root().join(format!("denoiser/weights/{stem}.safetensors"));
     let device = denoiser::cpu_device();
     let loaded = denoiser::weights::load(&weights, &device).unwrap_or_else(|e| panic!("shipped weights {}: {e}", weights.display()));
     assert_eq!(loaded.method, method);
-    let reference = exr_io::read_frame(&root().join("scenes/references/cornell-box.exr")).unwrap();
-    let mut scene = Scene::load(Path::new(&root().join("scenes/cornell-box/scene.toml"))).unwrap();
+    let reference = exr_io::read_frame(&root().join(format!("scenes/references/{reference}.exr"))).unwrap();
+    let mut scene = Scene::load(Path::new(&root().join("scenes").join(scene))).unwrap();
     scene.camera.width = reference.width;
     scene.camera.height = reference.height;
     let request = BufferRequest { split: true, gbuffers: true, descriptors: method.needs_descriptors() };
-    let opts = RenderOptions { spp: 8, seed: 4242, ..RenderOptions::from_scene(&scene, request) };
+    let opts = RenderOptions { spp, seed: 4242, ..RenderOptions::from_scene(&scene, request) };
     let (frame, _) = integrator::render(&scene, &opts, &|_| {}).unwrap();
     let prepared = denoiser::preprocess::prepare(&frame).unwrap();
     let out = infer::denoise(&loaded.model, &loaded.config, &prepared, &frame.radiance.mean, &InferOptions::default(), &device).unwrap();
-    assert!(out.radiance.iter().all(|v| v.is_finite()), "{method}: non-finite output");
+    assert!(out.radiance.iter().all(|v| v.is_finite()), "{stem}: non-finite output");
+    (frame, out.radiance, reference)
+}
+
+/// Renders the cornell-box test scene at its reference size and 8 spp, denoises it with the
+/// shipped model `<stem>.safetensors` (a `method` model) and returns ((noisy, denoised) relMSE, (noisy, denoised) 1−SSIM),
+/// tone map (a), no border.
+fn errors(stem: &str, method: Method) -> ((f64, f64), (f64, f64)) {
+    let (frame, out, reference) = render_and_denoise("cornell-box/scene.toml", "cornell-box", 8, stem, method);
     let (w, h) = (reference.width as usize, reference.height as usize);
     let noisy = rel_mse(&frame.radiance.mean, &reference.radiance.mean, w, h, ToneMap::Paper, 0);
-    let denoised = rel_mse(&out.radiance, &reference.radiance.mean, w, h, ToneMap::Paper, 0);
+    let denoised = rel_mse(&out, &reference.radiance.mean, w, h, ToneMap::Paper, 0);
     let s_noisy = one_minus_ssim(&frame.radiance.mean, &reference.radiance.mean, w, h, ToneMap::Paper, 0);
-    let s_denoised = one_minus_ssim(&out.radiance, &reference.radiance.mean, w, h, ToneMap::Paper, 0);
+    let s_denoised = one_minus_ssim(&out, &reference.radiance.mean, w, h, ToneMap::Paper, 0);
     println!("{stem}: relMSE noisy {noisy:.5} → denoised {denoised:.5} ({:.2}× lower); 1-SSIM {s_noisy:.4} → {s_denoised:.4} ({:.2}× lower)", noisy / denoised, s_noisy / s_denoised);
     ((noisy, denoised), (s_noisy, s_denoised))
 }
@@ -100,20 +108,10 @@ fn shipped_edge_noise_guided_model_beats_the_noisy_render() {
 /// test"). The bar of 0.75 sits between: a model that darkens sparse images again fails.
 #[test]
 fn shipped_edge_noise_models_keep_a_sparse_2spp_image_bright() {
-    let reference = exr_io::read_frame(&root().join("scenes/references/veach-ajar.exr")).unwrap();
-    let mut scene = Scene::load(Path::new(&root().join("scenes/veach-ajar/scene.xml"))).unwrap();
-    scene.camera.width = reference.width;
-    scene.camera.height = reference.height;
-    let device = denoiser::cpu_device();
     let lum = |c: &[f32], i: usize| 0.2126 * c[3 * i] + 0.7152 * c[3 * i + 1] + 0.0722 * c[3 * i + 2];
     for (stem, method) in [("g-default", Method::G), ("guided-default", Method::Guided)] {
-        let loaded = denoiser::weights::load(&root().join(format!("denoiser/weights/edge-noise/{stem}.safetensors")), &device).unwrap();
-        let request = BufferRequest { split: true, gbuffers: true, descriptors: method.needs_descriptors() };
-        let opts = RenderOptions { spp: 2, seed: 4242, ..RenderOptions::from_scene(&scene, request) };
-        let (frame, _) = integrator::render(&scene, &opts, &|_| {}).unwrap();
-        let prepared = denoiser::preprocess::prepare(&frame).unwrap();
-        let out = infer::denoise(&loaded.model, &loaded.config, &prepared, &frame.radiance.mean, &InferOptions::default(), &device).unwrap();
-        let mut ratios: Vec<f32> = (0..out.radiance.len() / 3).map(|i| lum(&out.radiance, i) / lum(&reference.radiance.mean, i).max(1e-6)).collect();
+        let (_, out, reference) = render_and_denoise("veach-ajar/scene.xml", "veach-ajar", 2, &format!("edge-noise/{stem}"), method);
+        let mut ratios: Vec<f32> = (0..out.len() / 3).map(|i| lum(&out, i) / lum(&reference.radiance.mean, i).max(1e-6)).collect();
         ratios.sort_by(f32::total_cmp);
         let median = ratios[ratios.len() / 2];
         println!("edge-noise/{stem}: median brightness ratio {median:.3}");

@@ -265,7 +265,6 @@ fn noise_normalised_colour_guide_stops_only_at_steps_the_noise_cannot_explain() 
 /// 2026-11-24 weights).
 #[test]
 fn two_sided_noise_test_keeps_the_brightness_of_a_sparse_2spp_image() {
-    let d = cpu_device();
     let side = 32;
     let n = side * side;
     let mut rng = SplitMix64::new(7);
@@ -273,10 +272,7 @@ fn two_sided_noise_test_keeps_the_brightness_of_a_sparse_2spp_image() {
     let m = 3.0;
     let x: Vec<f64> = (0..4 * n).map(|i| match (i / n, lit[i % n]) { (_, false) => 0.0, (3, true) => m * m / 2.0, (_, true) => m }).collect();
     let mean_change = |group: GuideGroup| {
-        let cfg = tiny(4).with_compositor(ScaleCompositor::ConvexBlend).with_guides(vec![group]);
-        let mut net = cfg.init(1, &d);
-        set_constant_heads(&mut net, &cfg, box_kernels_no_blend(&cfg, Some(0.0)));
-        let out = to_vec(net.forward(tensor(&x, [1, 4, side, side], &d)));
+        let (out, cfg) = box_kernels_with_guide(&x, side, group, 0.0);
         let o = side - 2 * cfg.margin;
         // What plain 3×3 box kernels give on the kept window (they read one pixel beyond it).
         let boxed = |i: usize| {
@@ -302,7 +298,6 @@ fn two_sided_noise_test_keeps_the_brightness_of_a_sparse_2spp_image() {
 /// glass-still-life's caustics at 32–64 spp (docs/denoiser.md, "The two-sided noise test").
 #[test]
 fn one_sided_own_variance_guide_keeps_a_firefly_out_of_its_neighbours() {
-    let d = cpu_device();
     let side = 16;
     let n = side * side;
     let fly = 7 * side + 8;
@@ -311,10 +306,7 @@ fn one_sided_own_variance_guide_keeps_a_firefly_out_of_its_neighbours() {
         .map(|i| match (i / n, i % n == fly) { (3, true) => delta * delta * 63.0 / 64.0, (3, false) => 1e-6, (_, true) => 0.5 + delta, (_, false) => 0.5 })
         .collect();
     let neighbours_change = |group: GuideGroup| {
-        let cfg = tiny(4).with_compositor(ScaleCompositor::ConvexBlend).with_guides(vec![group]);
-        let mut net = cfg.init(1, &d);
-        set_constant_heads(&mut net, &cfg, box_kernels_no_blend(&cfg, Some(3.0)));
-        let out = to_vec(net.forward(tensor(&x, [1, 4, side, side], &d)));
+        let (out, cfg) = box_kernels_with_guide(&x, side, group, 3.0);
         let o = side - 2 * cfg.margin;
         (0..3 * o * o).filter(|i| (i % (o * o) / o + cfg.margin) * side + i % o + cfg.margin != fly).map(|i| (out[i] - 0.5).abs()).fold(0.0, f64::max)
     };
@@ -378,6 +370,16 @@ fn identity_kernels_full_blend(cfg: &MsKpConfig, strength: Option<f32>) -> impl 
         }
         bias
     }
+}
+
+/// The convex-blend column with the single guide `group`, box kernels without blend at
+/// log-strength `strength`, run on one `side`² image `x` (4 channels): its output and config.
+fn box_kernels_with_guide(x: &[f64], side: usize, group: GuideGroup, strength: f32) -> (Vec<f64>, MsKpConfig) {
+    let d = cpu_device();
+    let cfg = tiny(4).with_compositor(ScaleCompositor::ConvexBlend).with_guides(vec![group]);
+    let mut net = cfg.init(1, &d);
+    set_constant_heads(&mut net, &cfg, box_kernels_no_blend(&cfg, Some(strength)));
+    (to_vec(net.forward(tensor(x, [1, 4, side, side], &d))), cfg)
 }
 
 /// Sets every head to a constant output: zero weights and `bias(scale, channels)`.
