@@ -105,6 +105,7 @@ fn main() {
         colour: Tensor::random([b, 10, size, size], u, d),
         g_block: Tensor::random([b, 24, size, size], u, d),
         descriptors: Tensor::random([b, spp, 36, size, size], u, d),
+        spp,
     };
     let inputs = InputTensors { diffuse: input(&device), specular: input(&device), path_weight: Tensor::zeros([b, 1, size, size], &device) };
     let t_diff = Tensor::<4>::random([b, 3, o, o], u, &device);

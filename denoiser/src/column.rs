@@ -35,8 +35,9 @@ impl Column {
     }
 
     /// `[B, C_in, H, W]` → `[B, 3, H−2m, W−2m]`: the colour filtered by the predicted kernels.
-    /// Inputs are sanitised first (NaN → 0, clamped to ±[`INPUT_LIMIT`]).
-    pub fn forward(&self, input: Tensor<4>) -> Tensor<4> {
+    /// Inputs are sanitised first (NaN → 0, clamped to ±[`INPUT_LIMIT`]). `spp`: the input's
+    /// samples per pixel (noise-normalised guides weigh their test by it).
+    pub fn forward(&self, input: Tensor<4>, spp: usize) -> Tensor<4> {
         let [_, _, h, w] = input.dims();
         assert!(h > 2 * self.margin && w > 2 * self.margin, "column input {h}×{w} smaller than its {} px margin", self.margin);
         let input = sanitize(input, INPUT_LIMIT);
@@ -45,7 +46,7 @@ impl Column {
                 let logits = net.forward(input.clone());
                 apply_kernel(input.narrow(1, 0, 3), logits)
             }
-            (None, Some(unet)) => unet.forward(input),
+            (None, Some(unet)) => unet.forward(input, spp),
             _ => panic!("a column holds exactly one backbone"),
         }
     }
@@ -78,7 +79,7 @@ mod tests {
         for (name, col) in tiny_columns(c) {
             for fill in [None, Some(0.0), Some(1e6), Some(f64::NAN)] {
                 let v: Vec<f64> = (0..n).map(|i| fill.unwrap_or(specials[i % specials.len()])).collect();
-                let out = col.forward(tensor(&v, [1, c, 16, 16], &d));
+                let out = col.forward(tensor(&v, [1, c, 16, 16], &d), 4);
                 let o = 16 - 2 * col.margin;
                 assert_eq!(out.dims(), [1, 3, o, o], "{name}");
                 assert!(to_vec(out).iter().all(|v| v.is_finite()), "{name}: non-finite output for fill {fill:?}");
@@ -95,7 +96,7 @@ mod tests {
         let mut v: Vec<f64> = (0..c * 20 * 20).map(|i| ((i * 7919) % 101) as f64 / 50.0 - 1.0).collect();
         v[..3 * 400].iter_mut().for_each(|x| *x = 0.625);
         for (name, col) in tiny_columns(c) {
-            let out = to_vec(col.forward(tensor(&v, [1, c, 20, 20], &d)));
+            let out = to_vec(col.forward(tensor(&v, [1, c, 20, 20], &d), 4));
             for x in out {
                 assert!((x - 0.625).abs() < 1e-5, "{name}: {x}");
             }

@@ -151,8 +151,8 @@ mod tests {
         let cfg = KpcnConfig::new(Variant::G.in_channels()).with_depth(3).with_width(8).with_conv_kernel(3).with_filter_size(5);
         let x = Tensor::<4>::ones([2, 34, 12, 10], &d);
         let albedo = Tensor::<4>::ones([2, 3, 12, 10], &d).mul_scalar(0.5);
-        let dh = cfg.init(6, &d).forward(x.clone());
-        let ph = cfg.init(7, &d).forward(x);
+        let dh = cfg.init(6, &d).forward(x.clone(), 4);
+        let ph = cfg.init(7, &d).forward(x, 4);
         let out = recombine(dh.clone(), ph.clone(), albedo);
         assert_eq!(dh.dims(), [2, 3, 6, 4]);
         // The kernel is a convex combination and here every tap inside the buffer reads 1 and

@@ -141,14 +141,15 @@ impl BranchNets {
             }
             (_, None) => (None, None),
         };
-        let i_g = self.d_g.as_ref().map(|d| timed(lap, Part::DG, || d.forward(Tensor::cat(vec![input.colour.clone(), input.g_block.clone()], 1))));
+        let i_g = self.d_g.as_ref().map(|d| timed(lap, Part::DG, || d.forward(Tensor::cat(vec![input.colour.clone(), input.g_block.clone()], 1), input.spp)));
         let i_p = self.d_p.as_ref().map(|d| {
             let pb = pbuf.clone().expect("D_P needs a PathNet");
-            timed(lap, Part::DP, || d.forward(Tensor::cat(vec![input.colour.clone(), pb], 1)))
+            timed(lap, Part::DP, || d.forward(Tensor::cat(vec![input.colour.clone(), pb], 1), input.spp))
         });
         if let Some(d) = &self.d_gp {
+            let spp = input.spp;
             let x = Tensor::cat(vec![input.colour, input.g_block, path_weight, pbuf.expect("G+P needs a PathNet")], 1);
-            let output = timed(lap, Part::DP, || d.forward(x));
+            let output = timed(lap, Part::DP, || d.forward(x, spp));
             return BranchResult { output, i_g: None, i_p: None, weights: None, path };
         }
         match (&self.e, i_g, i_p) {
@@ -233,8 +234,8 @@ mod tests {
         let desc = Tensor::<5>::ones([b, s, 36, h, w], d).mul_scalar(0.3);
         let g_block = r([b, 24, h, w], 0.5);
         InputTensors {
-            diffuse: BranchInput { colour: r([b, 10, h, w], 0.7), g_block: g_block.clone(), descriptors: desc.clone() },
-            specular: BranchInput { colour: r([b, 10, h, w], 0.2), g_block, descriptors: desc },
+            diffuse: BranchInput { colour: r([b, 10, h, w], 0.7), g_block: g_block.clone(), descriptors: desc.clone(), spp: s },
+            specular: BranchInput { colour: r([b, 10, h, w], 0.2), g_block, descriptors: desc, spp: s },
             path_weight: r([b, 1, h, w], -0.1),
         }
     }

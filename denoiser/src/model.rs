@@ -110,13 +110,15 @@ impl DenoiserConfig {
         c
     }
 
-    /// `edge` with the colour guides measured in units of the colour's noise by a two-sided test
-    /// ([`EdgeStopping::FeaturesAndTwoSidedNoisyColour`]) instead of brighter-only log
-    /// differences. Weight files of the one-sided form (2026-11-25, afternoon) keep theirs: the
-    /// variant is stored in each file's config.
+    /// `edge` with the colour guides measured in units of the colour's noise instead of
+    /// brighter-only log differences, by a test that is two-sided at 2 spp and fades toward
+    /// Rousselle's one-sided one as the samples grow
+    /// ([`EdgeStopping::FeaturesAndFadingTwoSidedNoisyColour`]). Weight files of the one-sided
+    /// (2026-11-25, afternoon) and the two-sided form (evening) keep theirs: the variant is
+    /// stored in each file's config.
     pub fn edge_noise() -> Self {
         let mut c = Self::edge();
-        c.mskp = c.mskp.map(|m| m.with_edge_stopping(EdgeStopping::FeaturesAndTwoSidedNoisyColour));
+        c.mskp = c.mskp.map(|m| m.with_edge_stopping(EdgeStopping::FeaturesAndFadingTwoSidedNoisyColour));
         c
     }
 
@@ -184,11 +186,13 @@ fn edge_guides(v: Variant, stopping: EdgeStopping) -> Vec<GuideGroup> {
         // mskp::pooled_variance). The pooled one starts at e^−3, where a jump of 3σ in every
         // channel keeps ~30 % of a tap's weight and one of 10σ none, so it acts from the first
         // step; the own one at e^−5, to be raised where the network finds it reliable.
-        EdgeStopping::FeaturesAndNoisyColour | EdgeStopping::FeaturesAndTwoSidedNoisyColour => {
+        EdgeStopping::FeaturesAndNoisyColour | EdgeStopping::FeaturesAndTwoSidedNoisyColour | EdgeStopping::FeaturesAndFadingTwoSidedNoisyColour => {
             let mut own = GuideGroup::new(0, 3, 1.0, false).with_variance(3).with_init_log_strength(-5.0);
             let mut pooled = GuideGroup::new(0, 3, 1.0, false).with_pooled_variance(3).with_init_log_strength(-3.0);
-            if stopping == EdgeStopping::FeaturesAndTwoSidedNoisyColour {
-                (own, pooled) = (own.two_sided(), pooled.two_sided());
+            match stopping {
+                EdgeStopping::FeaturesAndTwoSidedNoisyColour => (own, pooled) = (own.two_sided(), pooled.two_sided()),
+                EdgeStopping::FeaturesAndFadingTwoSidedNoisyColour => (own, pooled) = (own.two_sided_fading(), pooled.two_sided_fading()),
+                _ => {}
             }
             return [own, pooled].into_iter().chain(edge_guides(v, EdgeStopping::Features)).collect();
         }
@@ -257,6 +261,8 @@ pub struct BranchInput {
     pub g_block: Tensor<4>,
     /// Normalised path descriptors `[B, S, 36, H, W]`.
     pub descriptors: Tensor<5>,
+    /// Samples per pixel of the colour (S may be 0 where no descriptors were rendered).
+    pub spp: usize,
 }
 
 #[cfg(test)]
@@ -290,6 +296,7 @@ mod tests {
             colour: tensor(&r(b * 10 * h * w), [b, 10, h, w], d),
             g_block: tensor(&r(b * 24 * h * w), [b, 24, h, w], d),
             descriptors: tensor(&r(b * s * 36 * h * w), [b, s, 36, h, w], d),
+            spp: s,
         };
         let (diffuse, specular) = (branch(), branch());
         InputTensors { diffuse, specular, path_weight: Tensor::zeros([b, 1, h, w], d) }
@@ -379,6 +386,7 @@ mod tests {
                 colour: Tensor::zeros([b, 10, h, w], &d),
                 g_block: Tensor::zeros([b, 24, h, w], &d),
                 descriptors: Tensor::zeros([b, s, 36, h, w], &d),
+                spp: s,
             };
             let out = m.forward(input);
             let o = h - 2 * cfg.margin();

@@ -474,11 +474,13 @@ impl PreparedImage {
                 colour: stack(&|c| &c.diffuse, COLOUR_BLOCK),
                 g_block: g_block.clone(),
                 descriptors: descriptors.clone(),
+                spp: s,
             },
             specular: BranchInput {
                 colour: stack(&|c| &c.specular, COLOUR_BLOCK),
                 g_block,
                 descriptors,
+                spp: s,
             },
             path_weight: stack(&|c| &c.path_weight, 1),
         }

@@ -315,8 +315,8 @@ mod tests {
         let g = tensor(&r(b * 24 * h * w), [b, 24, h, w], d);
         let desc: Tensor<5> = tensor(&r(b * s * 36 * h * w), [b, s, 36, h, w], d);
         InputTensors {
-            diffuse: BranchInput { colour: tensor(&r(b * 10 * h * w), [b, 10, h, w], d), g_block: g.clone(), descriptors: desc.clone() },
-            specular: BranchInput { colour: tensor(&r(b * 10 * h * w), [b, 10, h, w], d), g_block: g, descriptors: desc },
+            diffuse: BranchInput { colour: tensor(&r(b * 10 * h * w), [b, 10, h, w], d), g_block: g.clone(), descriptors: desc.clone(), spp: s },
+            specular: BranchInput { colour: tensor(&r(b * 10 * h * w), [b, 10, h, w], d), g_block: g, descriptors: desc, spp: s },
             path_weight: tensor(&r(b * h * w), [b, 1, h, w], d),
         }
     }

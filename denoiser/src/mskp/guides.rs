@@ -29,6 +29,11 @@ pub enum EdgeStopping {
     /// feature's difference is about its own variance and passes (docs/denoiser.md, "The
     /// two-sided noise test").
     FeaturesAndTwoSidedNoisyColour,
+    /// As `FeaturesAndTwoSidedNoisyColour`, with the two-sided share fading as 1/(N − 1) at N
+    /// spp ([`GuideGroup::two_sided_fades`]): two-sided at 2 spp, where a zero variance says
+    /// nothing, and nearly Rousselle's one-sided test at 32–64 spp, where it is sound. The
+    /// `edge-noise` preset since 2026-11-26.
+    FeaturesAndFadingTwoSidedNoisyColour,
 }
 
 /// Input channels `start..start + len` used as an edge-stopping guide, multiplied by `scale`
@@ -70,11 +75,22 @@ pub struct GuideGroup {
     /// have the one-sided form.
     #[serde(default)]
     pub two_sided: bool,
+    /// With `two_sided`: at N spp subtract w·2(v_p + v_q) + (1 − w)·(v_p + min(v_p, v_q)), w =
+    /// 1/(N − 1) (1 at N ≤ 2). A pixel whose N samples all found no light reports v = 0; at 2
+    /// spp that is an accident of two samples (the two-sided test lets it take its lit
+    /// neighbours in), at 64 spp it is a fact (a diffuse wall beside a glinting wire has no
+    /// specular light, and the two-sided test had let the wire's highlight spill onto it:
+    /// wire-fence at 64 spp 0.0035 one-sided, 0.0088 two-sided, noisy 0.0038). How sure a
+    /// variance estimate of N samples is grows with N; the share of the test that doubts it falls
+    /// as 1/(N − 1), the gap between the unbiased and the population variance that the renderer
+    /// reports. Files without the field keep the full two-sided test.
+    #[serde(default)]
+    pub two_sided_fades: bool,
 }
 
 impl GuideGroup {
     pub fn new(start: usize, len: usize, scale: f64, log: bool) -> Self {
-        GuideGroup { start, len, scale, log, brighter_only: false, variance: None, init_log_strength: None, pooled_variance: false, two_sided: false }
+        GuideGroup { start, len, scale, log, brighter_only: false, variance: None, init_log_strength: None, pooled_variance: false, two_sided: false, two_sided_fades: false }
     }
 
     pub fn brighter_only(self) -> Self {
@@ -96,6 +112,12 @@ impl GuideGroup {
         GuideGroup { two_sided: true, ..self }
     }
 
+    /// The two-sided test with its share fading with the sample count
+    /// ([`GuideGroup::two_sided_fades`]).
+    pub fn two_sided_fading(self) -> Self {
+        GuideGroup { two_sided: true, two_sided_fades: true, ..self }
+    }
+
     pub fn with_init_log_strength(self, s: f32) -> Self {
         GuideGroup { init_log_strength: Some(s), ..self }
     }
@@ -108,14 +130,15 @@ pub struct GuideLevel {
     x: Tensor<4>,
     var: Option<Tensor<4>>,
     brighter_only: bool,
-    two_sided: bool,
+    /// Share of the two-sided test in the subtraction (0: one-sided; [`GuideGroup::two_sided_fades`]).
+    two_sided_share: f32,
 }
 
 impl GuideLevel {
     /// The next coarser level: 2×2 box means, whose variance is a quarter of the mean variance
     /// (independent pixels).
     pub(super) fn down(&self) -> Self {
-        GuideLevel { x: box_down(self.x.clone()), var: self.var.clone().map(|v| box_down(v).div_scalar(4.0)), brighter_only: self.brighter_only, two_sided: self.two_sided }
+        GuideLevel { x: box_down(self.x.clone()), var: self.var.clone().map(|v| box_down(v).div_scalar(4.0)), brighter_only: self.brighter_only, two_sided_share: self.two_sided_share }
     }
 }
 
@@ -141,10 +164,16 @@ fn guide_distance(q: Tensor<4>, p: Tensor<4>, var: Option<(Tensor<4>, Tensor<4>)
     match var {
         None => d2.sum_dim(1).squeeze_dim(1),
         Some((vq, vp)) => {
-            let explained = if g.two_sided {
-                (vq.clone() + vp.clone()).mul_scalar(TWO_SIDED_NOISE_FACTOR)
+            let two_sided = || (vq.clone() + vp.clone()).mul_scalar(TWO_SIDED_NOISE_FACTOR);
+            // v_p + min(v_p, v_q), min written so that autodiff sees one expression.
+            let one_sided = || vp.clone() + (vq.clone() + vp.clone() - (vq.clone() - vp.clone()).abs()).mul_scalar(0.5);
+            let w = g.two_sided_share;
+            let explained = if w >= 1.0 {
+                two_sided()
+            } else if w <= 0.0 {
+                one_sided()
             } else {
-                vp.clone() + (vq.clone() + vp.clone() - (vq.clone() - vp.clone()).abs()).mul_scalar(0.5)
+                two_sided().mul_scalar(w) + one_sided().mul_scalar(1.0 - w)
             };
             let excess = (d2 - explained).clamp_min(0.0);
             (excess / (vq + vp).add_scalar(NOISE_EPS)).sum_dim(1).squeeze_dim(1)
@@ -182,9 +211,19 @@ pub(super) fn pooled_variance(v: Tensor<4>) -> Tensor<4> {
     v.max_pair(mean)
 }
 
+/// Share of the two-sided test at `spp` samples per pixel ([`GuideGroup::two_sided_fades`]).
+pub fn two_sided_share(g: &GuideGroup, spp: usize) -> f32 {
+    match (g.two_sided, g.two_sided_fades) {
+        (false, _) => 0.0,
+        (true, false) => 1.0,
+        (true, true) => 1.0 / (spp.max(2) - 1) as f32,
+    }
+}
+
 /// The guide groups' features at full size, scaled (and log-compressed where asked), with their
-/// variances for noise-normalised groups (scaled alike, clamped at 0), in the group order.
-pub(super) fn guide_features(input: &Tensor<4>, guides: &[GuideGroup]) -> Vec<GuideLevel> {
+/// variances for noise-normalised groups (scaled alike, clamped at 0), in the group order, for an
+/// input of `spp` samples per pixel.
+pub(super) fn guide_features(input: &Tensor<4>, guides: &[GuideGroup], spp: usize) -> Vec<GuideLevel> {
     guides
         .iter()
         .map(|g| {
@@ -195,7 +234,7 @@ pub(super) fn guide_features(input: &Tensor<4>, guides: &[GuideGroup]) -> Vec<Gu
                 let v = if g.pooled_variance { pooled_variance(v) } else { v };
                 v.mul_scalar(g.scale * g.scale)
             });
-            GuideLevel { x: x.mul_scalar(g.scale), var, brighter_only: g.brighter_only, two_sided: g.two_sided }
+            GuideLevel { x: x.mul_scalar(g.scale), var, brighter_only: g.brighter_only, two_sided_share: two_sided_share(g, spp) }
         })
         .collect()
 }

@@ -47,7 +47,7 @@ use crate::kernel::apply_kernel;
 use crate::layers::{center_crop, conv_macs, Activation, Conv, ConvSpec, ConvStack, Init, Padding};
 
 mod guides;
-pub use guides::{tap_distances, EdgeStopping, GuideGroup, GuideLevel};
+pub use guides::{tap_distances, two_sided_share, EdgeStopping, GuideGroup, GuideLevel};
 use guides::{guide_features, joint_upsample, VARIANCE_POOL};
 #[cfg(test)]
 use guides::pooled_variance;
@@ -386,11 +386,11 @@ impl MsKpNet {
         out.expect("at least one kernel scale")
     }
 
-    /// `[B, C_in, H, W]` (sanitised) → `[B, 3, H−2m, W−2m]`.
-    pub fn forward(&self, input: Tensor<4>) -> Tensor<4> {
+    /// `[B, C_in, H, W]` (sanitised) at `spp` samples per pixel → `[B, 3, H−2m, W−2m]`.
+    pub fn forward(&self, input: Tensor<4>, spp: usize) -> Tensor<4> {
         let [_, _, h, w] = input.dims();
         let heads = self.heads(input.clone());
-        let guides = guide_features(&input, &self.guides);
+        let guides = guide_features(&input, &self.guides, spp);
         let out = Self::composite(input.narrow(1, 0, 3), guides, heads, self.low_pass_swap);
         center_crop(out, h - 2 * self.margin, w - 2 * self.margin)
     }

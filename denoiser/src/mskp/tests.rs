@@ -40,8 +40,15 @@ fn edge_stopping_gradients_match_finite_differences() {
         // Noise-normalised: the variance channel (4) is on the gradient path too.
         let noisy = vec![GuideGroup::new(0, 3, 1.0, false).with_variance(4).with_init_log_strength(-1.0), GuideGroup::new(0, 3, 1.0, false).with_pooled_variance(4)];
         gradients_match_finite_differences_for(tiny(5).with_compositor(compositor).with_guides(noisy));
+        // The fading two-sided test at GRADIENT_SPP blends both subtractions (share 1/3).
+        let fading = vec![GuideGroup::new(0, 3, 1.0, false).with_variance(4).with_init_log_strength(-1.0).two_sided_fading()];
+        gradients_match_finite_differences_for(tiny(5).with_compositor(compositor).with_guides(fading));
     }
 }
+
+/// Samples per pixel of the gradient checks' inputs: a fading two-sided guide is then half-way
+/// between its two forms, so both are on the gradient path.
+const GRADIENT_SPP: usize = 4;
 
 fn gradients_match_finite_differences_for(cfg: MsKpConfig) {
     let dev = cpu_training_device();
@@ -52,11 +59,11 @@ fn gradients_match_finite_differences_for(cfg: MsKpConfig) {
     let o = 8 - 2 * cfg.margin;
     let probe: Vec<f64> = (0..3 * o * o).map(|_| rng.symmetric(1.0) as f64).collect();
     let objective = |net: &MsKpNet, x: &[f64]| -> f64 {
-        let out = to_vec(net.valid().forward(tensor(x, dims, &cpu_device())));
+        let out = to_vec(net.valid().forward(tensor(x, dims, &cpu_device()), GRADIENT_SPP));
         out.iter().zip(&probe).map(|(a, b)| a * b).sum()
     };
     let xt = tensor(&x, dims, &dev).require_grad();
-    let grads = (net.forward(xt.clone()) * tensor(&probe, [1, 3, o, o], &dev)).sum().backward();
+    let grads = (net.forward(xt.clone(), GRADIENT_SPP) * tensor(&probe, [1, 3, o, o], &dev)).sum().backward();
     let h = 2e-3;
     let gx = grad_of(&xt, &grads);
     let fd_x: Vec<f64> = (0..x.len())
@@ -134,7 +141,7 @@ fn constructed_identity_returns_the_input() {
         bias[taps] = alpha;
         net.heads[0].weight = burn::module::Param::from_tensor(Tensor::zeros([taps + 1, c0, 1, 1], &d));
         net.heads[0].bias = burn::module::Param::from_tensor(Tensor::from_data(burn::tensor::TensorData::new(bias, [taps + 1]), &d));
-        let out = to_vec(net.forward(tensor(&x, dims, &d)));
+        let out = to_vec(net.forward(tensor(&x, dims, &d), 4));
         let m = cfg.margin;
         let mut worst = 0.0f64;
         for b in 0..2 {
@@ -272,7 +279,7 @@ fn two_sided_noise_test_keeps_the_brightness_of_a_sparse_2spp_image() {
     let m = 3.0;
     let x: Vec<f64> = (0..4 * n).map(|i| match (i / n, lit[i % n]) { (_, false) => 0.0, (3, true) => m * m / 2.0, (_, true) => m }).collect();
     let mean_change = |group: GuideGroup| {
-        let (out, cfg) = box_kernels_with_guide(&x, side, group, 0.0);
+        let (out, cfg) = box_kernels_with_guide(&x, side, 2, group, 0.0);
         let o = side - 2 * cfg.margin;
         // What plain 3×3 box kernels give on the kept window (they read one pixel beyond it).
         let boxed = |i: usize| {
@@ -286,7 +293,9 @@ fn two_sided_noise_test_keeps_the_brightness_of_a_sparse_2spp_image() {
     };
     let one_sided = mean_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3));
     let two_sided = mean_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3).two_sided());
+    let fading = mean_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3).two_sided_fading());
     assert!(two_sided.abs() < 1e-5, "two-sided test changed the mean brightness by {two_sided}");
+    assert!(fading.abs() < 1e-5, "the fading test is two-sided at 2 spp, but changed the mean brightness by {fading}");
     assert!(one_sided < -0.05, "the one-sided form should darken a sparse image ({one_sided})");
 }
 
@@ -296,6 +305,7 @@ fn two_sided_noise_test_keeps_the_brightness_of_a_sparse_2spp_image() {
 /// (2·10⁻⁶), so at strength e^3 they keep their value; the two-sided test calls the same
 /// difference noise (Δ² < 2(v_p + v_q)) and lets it in: the price of the two-sided test, paid on
 /// glass-still-life's caustics at 32–64 spp (docs/denoiser.md, "The two-sided noise test").
+/// The fading test keeps 1/63 of the two-sided subtraction at 64 spp, and the firefly out.
 #[test]
 fn one_sided_own_variance_guide_keeps_a_firefly_out_of_its_neighbours() {
     let side = 16;
@@ -306,13 +316,15 @@ fn one_sided_own_variance_guide_keeps_a_firefly_out_of_its_neighbours() {
         .map(|i| match (i / n, i % n == fly) { (3, true) => delta * delta * 63.0 / 64.0, (3, false) => 1e-6, (_, true) => 0.5 + delta, (_, false) => 0.5 })
         .collect();
     let neighbours_change = |group: GuideGroup| {
-        let (out, cfg) = box_kernels_with_guide(&x, side, group, 3.0);
+        let (out, cfg) = box_kernels_with_guide(&x, side, 64, group, 3.0);
         let o = side - 2 * cfg.margin;
         (0..3 * o * o).filter(|i| (i % (o * o) / o + cfg.margin) * side + i % o + cfg.margin != fly).map(|i| (out[i] - 0.5).abs()).fold(0.0, f64::max)
     };
     let one_sided = neighbours_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3));
     let two_sided = neighbours_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3).two_sided());
+    let fading = neighbours_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3).two_sided_fading());
     assert!(one_sided < 1e-3, "the one-sided test let the firefly into its neighbours ({one_sided})");
+    assert!(fading < 1e-3, "the fading test at 64 spp let the firefly into its neighbours ({fading})");
     assert!(two_sided > 0.02, "the two-sided test should let the firefly in ({two_sided})");
 }
 
@@ -374,12 +386,12 @@ fn identity_kernels_full_blend(cfg: &MsKpConfig, strength: Option<f32>) -> impl 
 
 /// The convex-blend column with the single guide `group`, box kernels without blend at
 /// log-strength `strength`, run on one `side`² image `x` (4 channels): its output and config.
-fn box_kernels_with_guide(x: &[f64], side: usize, group: GuideGroup, strength: f32) -> (Vec<f64>, MsKpConfig) {
+fn box_kernels_with_guide(x: &[f64], side: usize, spp: usize, group: GuideGroup, strength: f32) -> (Vec<f64>, MsKpConfig) {
     let d = cpu_device();
     let cfg = tiny(4).with_compositor(ScaleCompositor::ConvexBlend).with_guides(vec![group]);
     let mut net = cfg.init(1, &d);
     set_constant_heads(&mut net, &cfg, box_kernels_no_blend(&cfg, Some(strength)));
-    (to_vec(net.forward(tensor(x, [1, 4, side, side], &d))), cfg)
+    (to_vec(net.forward(tensor(x, [1, 4, side, side], &d), spp)), cfg)
 }
 
 /// Sets every head to a constant output: zero weights and `bias(scale, channels)`.
@@ -397,7 +409,7 @@ fn set_constant_heads(net: &mut MsKpNet, cfg: &MsKpConfig, bias: impl Fn(usize, 
 /// `side`², cropped by the margin).
 fn largest_change(net: &MsKpNet, cfg: &MsKpConfig, x: &[f64], side: usize) -> f64 {
     let c_in = x.len() / (side * side);
-    let out = to_vec(net.forward(tensor(x, [1, c_in, side, side], &cpu_device())));
+    let out = to_vec(net.forward(tensor(x, [1, c_in, side, side], &cpu_device()), 4));
     let (m, o) = (cfg.margin, side - 2 * cfg.margin);
     let mut worst = 0.0f64;
     for c in 0..3 {
@@ -417,7 +429,7 @@ fn any_size_runs() {
     for (cfg, c) in [(tiny(3), 3), (guided, 4)] {
         let net = cfg.init(2, &d);
         for (h, w) in [(13, 9), (5, 7), (4, 4)] {
-            let out = net.forward(Tensor::<4>::ones([1, c, h, w], &d));
+            let out = net.forward(Tensor::<4>::ones([1, c, h, w], &d), 4);
             assert_eq!(out.dims(), [1, 3, h - 2, w - 2]);
             assert!(to_vec(out).iter().all(|v| (v - 1.0).abs() < 1e-5));
         }
