@@ -11,5 +11,4 @@ pub mod denoise;
 pub mod eval;
 pub mod eval_plot;
 pub mod plot_training;
-pub mod eval_report;
 pub mod oidn_setup;

@@ -1,24 +1,31 @@
 //! `pixguide eval`: the speed-versus-error evaluation of issue #6 — every held-out test scene
 //! rendered at each spp, denoised in process by every method, scored against its reference;
-//! written to docs/results.md with plots and pictures (eval_report.rs). Resumable through a
+//! written to docs/results.md with plots and pictures (report.rs). Resumable through a
 //! cache of finished measurements.
+//!
+//! Here: the arguments and the run. Beside it: the methods (methods.rs), the test scenes
+//! (scenes.rs), the measurement cache (cache.rs), the results page (report.rs) and its
+//! pictures (pictures.rs).
+
+mod cache;
+mod methods;
+mod pictures;
+mod report;
+mod scenes;
 
 use super::denoise::InferArgs;
 use super::progress;
 use anyhow::{bail, Context, Result};
+use cache::{key, Cache, Record};
 use clap::Args;
 use denoiser::infer::{self, Denoised};
-use denoiser::method::Method;
 use denoiser::metrics;
-use denoiser::oidn::Oidn;
 use denoiser::preprocess::{self, PreparedImage};
-use denoiser::weights::{self, Loaded};
-use renderer::film::{BufferRequest, Frame};
-use renderer::integrator::{self, RenderOptions};
+use methods::{MethodSpec, BREAKDOWN_METHODS, PICTURE_METHODS};
+use renderer::film::Frame;
 use renderer::scene::Scene;
-use serde::{Deserialize, Serialize};
+use scenes::{load_scene, render, TestScene};
 use std::collections::HashMap;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -71,271 +78,12 @@ pub struct EvalArgs {
     pub quiet: bool,
 }
 
-/// Methods `eval` knows: name, weight file stem, label in tables and plots.
-pub const KNOWN: [(&str, &str, &str); 8] = [
-    ("g", "g-default", "D_G (g)"),
-    ("p", "p-default", "D_P (p)"),
-    ("both", "both-default", "both-buffers"),
-    ("guided", "guided-default", "guided"),
-    ("guided-half", "guided-half", "guided (half)"),
-    ("fix-n-train", "fix-n-train-default", "Fix-N-Train"),
-    ("full-n-full", "full-n-full-default", "Full-N-Full"),
-    ("radiance-only", "radiance-only-default", "E radiances only"),
-];
-
-/// Methods shown in the pictures, in order.
-pub const PICTURE_METHODS: [&str; 6] = ["noisy", "g", "p", "both", "guided", "oidn"];
-
-/// Label of the OIDN baseline in tables and plots.
-pub const OIDN_LABEL: &str = "OIDN";
-
-/// Methods of the runtime breakdown, in its row order per spp.
-pub const BREAKDOWN_METHODS: [&str; 2] = ["guided", "oidn"];
-
 /// The spp whose noisy error normalises every other (method.md §7.3).
 pub const NORM_SPP: u32 = 2;
-
-/// One evaluated method.
-pub struct MethodSpec {
-    pub name: String,
-    pub label: String,
-    /// Weight file (None for noisy and OIDN).
-    pub file: Option<PathBuf>,
-    /// Identity of the weights (size and FNV-1a hash of the file), "mc" for noisy, OIDN's
-    /// version and settings for OIDN.
-    pub id: String,
-    pub loaded: Option<Loaded>,
-    /// The OIDN baseline's library, loaded once per run.
-    pub oidn: Option<Oidn>,
-    /// Why the method is not evaluated, e.g. "no denoiser/weights/both-default.safetensors".
-    pub missing: Option<String>,
-}
-
-impl MethodSpec {
-    pub fn available(&self) -> bool {
-        self.missing.is_none()
-    }
-    fn needs_descriptors(&self) -> bool {
-        self.loaded.as_ref().is_some_and(|l| l.method.needs_descriptors())
-    }
-}
-
-pub struct TestScene {
-    pub name: String,
-    pub path: PathBuf,
-    pub reference: PathBuf,
-    /// [`file_id`] of the reference: a re-rendered reference (a scene or renderer fix) makes
-    /// every cached score of the scene stale.
-    pub reference_id: String,
-    pub width: u32,
-    pub height: u32,
-}
-
-/// One finished measurement (a line of the cache).
-#[derive(Clone, Debug, Serialize, Deserialize, Default)]
-#[serde(default)]
-pub struct Record {
-    /// "quality" or "breakdown".
-    pub kind: String,
-    pub scene: String,
-    pub spp: u32,
-    pub method: String,
-    pub weights: String,
-    pub seed: u64,
-    pub width: u32,
-    pub height: u32,
-    /// [`TestScene::reference_id`] of a quality record's reference ("" for breakdowns, which
-    /// measure time only).
-    pub reference: String,
-    pub rel_mse: f64,
-    pub rel_mse_gamma: f64,
-    pub one_minus_ssim: f64,
-    /// Wall seconds of the render this method's input came from.
-    pub render_s: f64,
-    /// Preprocessing (method.md §2, §4.1).
-    pub prepare_s: f64,
-    /// Tiled inference, everything.
-    pub denoise_s: f64,
-    /// render + preprocessing + inference: the time of the method.
-    pub time_s: f64,
-    pub gather_s: f64,
-    pub d_g_s: f64,
-    pub d_p_s: f64,
-    pub e_s: f64,
-    pub readback_s: f64,
-    /// UTC date of the measurement and the 1-minute load average right after it.
-    pub date: String,
-    pub load1: f64,
-}
-
-impl Record {
-    fn key(&self) -> String {
-        key(&self.kind, &self.scene, &self.reference, self.spp, &self.method, &self.weights, self.seed, self.width, self.height)
-    }
-}
-
-#[allow(clippy::too_many_arguments)]
-fn key(kind: &str, scene: &str, reference: &str, spp: u32, method: &str, weights: &str, seed: u64, w: u32, h: u32) -> String {
-    format!("{kind}|{scene}@{reference}|{spp}|{method}|{weights}|{seed}|{w}x{h}")
-}
 
 /// 1-minute load average (0 where /proc is missing).
 pub fn load1() -> f64 {
     std::fs::read_to_string("/proc/loadavg").ok().and_then(|s| s.split_whitespace().next().and_then(|v| v.parse().ok())).unwrap_or(0.0)
-}
-
-/// Size and FNV-1a 64 hash of a file: changes whenever the weights do.
-fn file_id(path: &Path) -> Result<String> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in &bytes {
-        h = (h ^ *b as u64).wrapping_mul(0x100_0000_01b3);
-    }
-    Ok(format!("{}:{h:016x}", bytes.len()))
-}
-
-fn methods(a: &EvalArgs) -> Result<Vec<MethodSpec>> {
-    let mut names: Vec<String> = vec!["noisy".into()];
-    for m in a.methods.iter().map(|s| s.trim()).filter(|s| !s.is_empty()) {
-        if m != "noisy" && m != "oidn" && !KNOWN.iter().any(|k| k.0 == m) {
-            bail!("--methods: unknown method `{m}` (expected noisy, {}, oidn)", KNOWN.map(|k| k.0).join(", "));
-        }
-        if !names.iter().any(|n| n == m) {
-            names.push(m.to_string());
-        }
-    }
-    let device = denoiser::cpu_device();
-    let mut out = Vec::new();
-    for name in names {
-        if name == "oidn" {
-            let label = OIDN_LABEL.to_string();
-            match super::oidn_setup::load() {
-                Ok((o, _)) => out.push(MethodSpec { name, label, file: None, id: super::oidn_setup::method_id(&o), loaded: None, oidn: Some(o), missing: None }),
-                Err(e) => {
-                    // One line, and the run goes on without it: the baseline is optional.
-                    eprintln!("eval: leaving out OIDN: {e:#}");
-                    out.push(MethodSpec { name, label, file: None, id: String::new(), loaded: None, oidn: None, missing: Some(format!("{e:#}")) });
-                }
-            }
-            continue;
-        }
-        let Some(&(_, stem, label)) = KNOWN.iter().find(|k| k.0 == name) else {
-            out.push(MethodSpec { name, label: "noisy (MC)".into(), file: None, id: "mc".into(), loaded: None, oidn: None, missing: None });
-            continue;
-        };
-        let file = a.weights_dir.join(format!("{stem}.safetensors"));
-        if !file.exists() {
-            let missing = Some(format!("no {}", file.display()));
-            out.push(MethodSpec { name: name.clone(), label: label.into(), file: Some(file), id: String::new(), loaded: None, oidn: None, missing });
-            continue;
-        }
-        let loaded = weights::load(&file, &device).with_context(|| format!("loading the {name} weights"))?;
-        let expect = Method::parse(&name).unwrap_or(Method::Guided);
-        if loaded.method != expect {
-            bail!("{} holds weights of the {} model, but `{name}` needs {expect} weights", file.display(), loaded.method);
-        }
-        let id = file_id(&file)?;
-        out.push(MethodSpec { name, label: label.into(), file: Some(file), id, loaded: Some(loaded), oidn: None, missing: None });
-    }
-    Ok(out)
-}
-
-fn scenes(list: &Path) -> Result<Vec<TestScene>> {
-    let text = std::fs::read_to_string(list).with_context(|| format!("reading the scene list {}", list.display()))?;
-    let dir = list.parent().unwrap_or(Path::new("."));
-    let mut out = Vec::new();
-    for (n, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let path = dir.join(line);
-        // The scene's name is its folder's (scenes/<name>/scene.toml).
-        let name = path.parent().and_then(|p| p.file_name()).map(|c| c.to_string_lossy().into_owned()).unwrap_or_default();
-        if !path.exists() {
-            bail!("{} line {}: scene {} does not exist", list.display(), n + 1, path.display());
-        }
-        let json = dir.join("references").join(format!("{name}.json"));
-        let reference = dir.join("references").join(format!("{name}.exr"));
-        if !reference.exists() {
-            bail!("no reference for the test scene {name}: {} does not exist (render it with `pixguide reference`)", reference.display());
-        }
-        let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).with_context(|| format!("reading {}", json.display()))?)
-            .with_context(|| format!("parsing {}", json.display()))?;
-        let dim = |f: &str| -> Result<u32> {
-            meta.get(f).and_then(|v| v.as_u64()).filter(|&v| v > 0 && v < 1 << 16).map(|v| v as u32).with_context(|| format!("{}: field `{f}` is missing or not a positive integer", json.display()))
-        };
-        let reference_id = file_id(&reference)?;
-        out.push(TestScene { name, path, reference, reference_id, width: dim("width")?, height: dim("height")? });
-    }
-    if out.is_empty() {
-        bail!("{} lists no scenes", list.display());
-    }
-    Ok(out)
-}
-
-fn read_cache(path: &Path) -> Result<HashMap<String, Record>> {
-    let mut map = HashMap::new();
-    let Ok(text) = std::fs::read_to_string(path) else { return Ok(map) };
-    for (n, line) in text.lines().enumerate() {
-        if line.trim().is_empty() {
-            continue;
-        }
-        // A line cut short by an interrupted run is skipped: it is measured again.
-        match serde_json::from_str::<Record>(line) {
-            Ok(r) => {
-                map.insert(r.key(), r);
-            }
-            Err(e) => eprintln!("warning: {} line {}: {e}; ignored", path.display(), n + 1),
-        }
-    }
-    Ok(map)
-}
-
-struct Cache {
-    map: HashMap<String, Record>,
-    file: std::fs::File,
-}
-
-impl Cache {
-    fn open(path: &Path) -> Result<Cache> {
-        super::denoise::ensure_parent(path)?;
-        let map = read_cache(path)?;
-        let file = std::fs::OpenOptions::new().create(true).append(true).open(path).with_context(|| format!("opening the cache {}", path.display()))?;
-        Ok(Cache { map, file })
-    }
-    fn get(&self, k: &str) -> Option<&Record> {
-        self.map.get(k)
-    }
-    fn put(&mut self, r: Record) -> Result<()> {
-        writeln!(self.file, "{}", serde_json::to_string(&r)?)?;
-        self.file.flush()?;
-        self.map.insert(r.key(), r);
-        Ok(())
-    }
-}
-
-/// Renders `scene` at `spp` with the seed; the G-buffers and the diffuse/specular split always,
-/// per-sample descriptors when asked. Returns the frame and its wall seconds.
-fn render(scene: &Scene, spp: u32, seed: u64, descriptors: bool) -> Result<(Frame, f64)> {
-    let mut opts = RenderOptions::from_scene(scene, BufferRequest { split: true, gbuffers: true, descriptors });
-    opts.spp = spp;
-    opts.seed = seed;
-    let t = Instant::now();
-    let (frame, _) = integrator::render(scene, &opts, &|_| {})?;
-    Ok((frame, t.elapsed().as_secs_f64()))
-}
-
-/// The scene at `w × h`, after one untimed 1-spp render: the first render after loading pays
-/// one-off costs (first touch of the scene's fresh memory, waking the thread pool) that would
-/// otherwise land on the time of the first spp measured (seen: 0.30 s at 2 spp against 0.07 s
-/// at 4 spp).
-fn load_scene(s: &TestScene, w: u32, h: u32) -> Result<Scene> {
-    let mut scene = Scene::load(&s.path).with_context(|| format!("loading {}", s.path.display()))?;
-    scene.camera.width = w;
-    scene.camera.height = h;
-    render(&scene, 1, 0, false).with_context(|| format!("rendering {}", s.path.display()))?;
-    Ok(scene)
 }
 
 /// Images kept for the pictures of one (scene, spp).
@@ -399,8 +147,8 @@ pub fn run(a: EvalArgs) -> Result<()> {
     if a.picture_spp.contains(&0) {
         bail!("--picture-spp: give positive sample counts");
     }
-    let scenes = scenes(&a.scenes)?;
-    let methods = methods(&a)?;
+    let scenes = scenes::scenes(&a.scenes)?;
+    let methods = methods::methods(&a)?;
     let pictures = picture_scenes(&a, &scenes);
     for p in &pictures {
         if !scenes.iter().any(|s| &s.name == p) {
@@ -604,7 +352,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
             pb.inc(1);
         }
         if let Some(p) = picture {
-            super::eval_report::write_pictures(&dir, &p)?;
+            pictures::write_pictures(&dir, &p)?;
         }
     }
 
@@ -669,7 +417,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         wall_s: t0.elapsed().as_secs_f64(),
         breakdown_scene,
     };
-    super::eval_report::write(&a, &outcome, &dir)?;
+    report::write(&a, &outcome, &dir)?;
     println!(
         "eval: {} measured, {} cached, {} renders, {:.1} s; wrote {} and {}",
         outcome.measured,
@@ -681,4 +429,3 @@ pub fn run(a: EvalArgs) -> Result<()> {
     );
     Ok(())
 }
-
