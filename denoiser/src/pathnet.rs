@@ -222,7 +222,8 @@ impl PathNet {
 
     /// `descriptors` `[B, S, 36, H, W]` → [`PathOutput`]. Any H, W ≥ 1 work (pooling floors,
     /// upsampling returns to the skip's exact size). The four stages in order; inference
-    /// (`infer.rs`) runs the pointwise ones over pixel chunks and the U-Net over the whole image.
+    /// (`infer/path_stage.rs`) runs the pointwise ones over pixel chunks and the U-Net over the
+    /// whole image.
     pub fn forward(&self, descriptors: Tensor<5>) -> PathOutput {
         let e = self.embed(descriptors);
         let g = self.unet(Self::pixel_mean(&e));
