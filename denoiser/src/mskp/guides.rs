@@ -24,7 +24,7 @@ pub enum EdgeStopping {
     /// difference stops the kernel, which tends to the identity on a converged input.
     FeaturesAndNoisyColour,
     /// As `FeaturesAndNoisyColour`, both colour guides with the two-sided test of
-    /// [`GuideGroup::two_sided`]: the `edge-noise` preset since 2026-11-25, evening. Sparse 2-spp
+    /// [`GuideGroup::two_sided`]: the `edge-noise` preset of 2026-11-25, evening. Sparse 2-spp
     /// images keep their brightness; the price is paid at 32–64 spp, where a firefly or a thin
     /// feature's difference is about its own variance and passes (docs/denoiser.md, "The
     /// two-sided noise test").
