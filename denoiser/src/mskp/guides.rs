@@ -164,9 +164,11 @@ fn guide_distance(q: Tensor<4>, p: Tensor<4>, var: Option<(Tensor<4>, Tensor<4>)
     match var {
         None => d2.sum_dim(1).squeeze_dim(1),
         Some((vq, vp)) => {
-            let two_sided = || (vq.clone() + vp.clone()).mul_scalar(TWO_SIDED_NOISE_FACTOR);
+            // v_p + v_q: what both tests subtract (scaled) and the unit of the distance.
+            let both = vq.clone() + vp.clone();
+            let two_sided = || both.clone().mul_scalar(TWO_SIDED_NOISE_FACTOR);
             // v_p + min(v_p, v_q), min written so that autodiff sees one expression.
-            let one_sided = || vp.clone() + (vq.clone() + vp.clone() - (vq.clone() - vp.clone()).abs()).mul_scalar(0.5);
+            let one_sided = || vp.clone() + (both.clone() - (vq.clone() - vp.clone()).abs()).mul_scalar(0.5);
             let w = g.two_sided_share;
             let explained = if w >= 1.0 {
                 two_sided()
@@ -176,7 +178,7 @@ fn guide_distance(q: Tensor<4>, p: Tensor<4>, var: Option<(Tensor<4>, Tensor<4>)
                 two_sided().mul_scalar(w) + one_sided().mul_scalar(1.0 - w)
             };
             let excess = (d2 - explained).clamp_min(0.0);
-            (excess / (vq + vp).add_scalar(NOISE_EPS)).sum_dim(1).squeeze_dim(1)
+            (excess / both.add_scalar(NOISE_EPS)).sum_dim(1).squeeze_dim(1)
         }
     }
 }
