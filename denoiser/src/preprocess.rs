@@ -523,5 +523,7 @@ impl PreparedTarget {
     }
 }
 
+pub mod window;
+
 #[cfg(test)]
 mod tests;
