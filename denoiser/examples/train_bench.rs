@@ -18,9 +18,7 @@ fn main() {
     let data_dir = args.first().expect("usage: train_bench DATA [rounds] [batch] [patch]");
     let num = |i: usize, d: usize| args.get(i).and_then(|s| s.parse().ok()).unwrap_or(d);
     let (rounds, batch, patch) = (num(1, 4), num(2, 4), num(3, 64));
-    // Margin 0: output windows drawn as whole patches stay inside the image for every preset
-    // timed here (a bench of step times, not of what the patches cover).
-    let load = LoadOptions { spps: vec![], descriptors: true, patch, margin: 0, sampling: Sampling::Importance, max_train: None };
+    let load = LoadOptions { spps: vec![], descriptors: true, patch, sampling: Sampling::Importance, max_train: None };
     let data = Dataset::load(std::path::Path::new(data_dir), &load, &mut |_, _| {}).unwrap();
     let dev = denoiser::cpu_training_device();
     let stage = |kind, rest: Option<f64>, e: Option<f64>, w| Stage { kind, steps: 1, lr_rest: rest, lr_e: e, w_path: w, shape: LrShape::Constant };

@@ -523,7 +523,5 @@ impl PreparedTarget {
     }
 }
 
-pub mod window;
-
 #[cfg(test)]
 mod tests;

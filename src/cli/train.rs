@@ -274,10 +274,10 @@ pub fn run(a: TrainArgs) -> Result<()> {
 
 /// Reads the training set `a.data` (with or without path descriptors) with a progress bar and
 /// reports its size.
-fn load_dataset(a: &TrainArgs, descriptors: bool, margin: usize, sampling: Sampling) -> Result<Dataset> {
+fn load_dataset(a: &TrainArgs, descriptors: bool, sampling: Sampling) -> Result<Dataset> {
     let t_load = Instant::now();
     let heap0 = alloc_stats::current();
-    let load = LoadOptions { spps: a.spp.clone(), descriptors, patch: a.patch, margin, sampling, max_train: a.max_train_shots };
+    let load = LoadOptions { spps: a.spp.clone(), descriptors, patch: a.patch, sampling, max_train: a.max_train_shots };
     let lpb = progress::bar(0, "loading shots");
     if a.quiet {
         lpb.set_draw_target(indicatif::ProgressDrawTarget::hidden());
@@ -302,10 +302,9 @@ fn load_dataset(a: &TrainArgs, descriptors: bool, margin: usize, sampling: Sampl
     Ok(data)
 }
 
-/// Datasets already read in this process, by whether they hold path descriptors and the margin
-/// their patch samplers were built for: `--all` reads each kind once for all its runs instead of
-/// once per run (20–43 s each).
-type DataCache = Vec<((bool, usize), Dataset)>;
+/// Datasets already read in this process, by whether they hold path descriptors: `--all` reads
+/// each kind once for all its runs instead of once per run (20–43 s each).
+type DataCache = Vec<(bool, Dataset)>;
 
 fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
     let output = a.output.clone().context("--output is required")?;
@@ -363,11 +362,10 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
     let device = backend.training_device().map_err(anyhow::Error::msg)?;
     let model = tr::initial_model(&opts, a.from_g.as_deref(), a.from_p.as_deref(), &device)?;
     let descriptors = method.needs_descriptors();
-    let key = (descriptors, opts.config.margin());
-    let k = match cache.iter().position(|c| c.0 == key) {
+    let k = match cache.iter().position(|c| c.0 == descriptors) {
         Some(k) => k,
         None => {
-            cache.push((key, load_dataset(&a, descriptors, key.1, sampling)?));
+            cache.push((descriptors, load_dataset(&a, descriptors, sampling)?));
             cache.len() - 1
         }
     };

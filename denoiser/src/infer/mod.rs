@@ -7,9 +7,8 @@
 //! a softmax that does not renormalise), and would show the networks zero normals/albedo/depth
 //! that they never met in training; replicating the edge pixel would make the kernel weight the
 //! noise of a single pixel many times. Mirroring keeps both the colour the kernel averages and the
-//! guidance features real. The pad shows a mirrored scene: normals flip their mirrored component
-//! and the gradient channels are recomputed from it ([`crate::preprocess::window`]); training
-//! patches reach into the same pad, so the networks have met it.
+//! guidance features real. (The forward-difference gradient channels are mirrored as stored, so
+//! their sign flips along the mirrored axis inside the pad; they only steer the kernels there.)
 //!
 //! **Path-manifold module first, per pixel.** For models with one (p, both, guided), the
 //! per-pixel P-buffers (f_P, v_P of each branch) are computed for the whole padded image before

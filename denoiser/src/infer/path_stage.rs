@@ -4,8 +4,7 @@
 use burn::tensor::{Device, Tensor};
 
 use super::to_vec;
-use super::window::{cut_map, window_origin};
-use crate::preprocess::window::reflect;
+use super::window::{cut_map, reflect, window_origin};
 use crate::model::DenoiserConfig;
 use crate::pathnet::PathNet;
 use crate::preprocess::{PreparedImage, DESCRIPTOR_CHANNELS};
@@ -80,8 +79,8 @@ pub(super) fn path_buffer(
             mean[c * n + p0..c * n + p1].copy_from_slice(&v[c * (p1 - p0)..(c + 1) * (p1 - p0)]);
         }
     }
-    let cols: Vec<usize> = (0..pw).map(|x| reflect(x as isize - m as isize, w).0).collect();
-    let rows: Vec<usize> = (0..ph).map(|y| reflect(y as isize - m as isize, h).0).collect();
+    let cols: Vec<usize> = (0..pw).map(|x| reflect(x as isize - m as isize, w)).collect();
+    let rows: Vec<usize> = (0..ph).map(|y| reflect(y as isize - m as isize, h)).collect();
     let np = pw * ph;
     let mut padded = Vec::with_capacity(ew * np);
     for c in 0..ew {

@@ -3,7 +3,7 @@
 
 use super::tiles::{clean, denoise_chunked};
 use super::timing::timed_forward;
-use super::window::{align_up, window};
+use super::window::{align_up, reflect, window};
 use super::*;
 use crate::ensemble::EnsembleConfig;
 use crate::kpcn::channels::{COLOUR_BLOCK, G_BLOCK};
@@ -39,6 +39,13 @@ fn random_image(w: usize, h: usize, s: usize, seed: u64) -> PreparedImage {
         records: None,
         passthrough: (0..n).map(|i| i % 11 == 0).collect(),
     }
+}
+
+#[test]
+fn reflect_mirrors_without_repeating_the_edge() {
+    let v: Vec<usize> = (-3..8).map(|i| reflect(i, 4)).collect();
+    assert_eq!(v, [3, 2, 1, 0, 1, 2, 3, 2, 1, 0, 1]);
+    assert_eq!(reflect(-5, 1), 0);
 }
 
 /// Small tiles (many windows, shifted edge windows, a partial last tile) give the same image

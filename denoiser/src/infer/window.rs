@@ -3,25 +3,58 @@
 
 use burn::tensor::{Device, Tensor};
 
-use crate::preprocess::window::{cut_window, Offset};
+use crate::kpcn::channels::{COLOUR_BLOCK, G_BLOCK};
 use crate::preprocess::PreparedImage;
 
-/// The `w × h` window whose top-left corner is at padded coordinates (x0, y0); padded
-/// coordinate p is image coordinate p − pad, read from the mirror-extended image as training
-/// patches are ([`cut_window`]: normals flipped and gradients recomputed in the pad).
-/// Descriptors are cut only if `descriptors` (the tiled pass reads precomputed P-buffers).
-pub(super) fn window(img: &PreparedImage, pad: usize, x0: usize, y0: usize, w: usize, h: usize, descriptors: bool) -> PreparedImage {
-    let (mut win, pixels) = cut_window(img, &Offset { x0: x0 as isize - pad as isize, y0: y0 as isize - pad as isize }, w, h);
-    if descriptors {
-        win.descriptors = img.descriptor_columns(&pixels);
+/// Mirror index into 0..n for any integer (period 2n−2).
+pub(super) fn reflect(i: isize, n: usize) -> usize {
+    if n == 1 {
+        return 0;
     }
-    // Pass-through pixels are restored from the noisy image after inference, not per window.
-    win.passthrough = Vec::new();
-    win
+    let period = 2 * (n as isize - 1);
+    let j = i.rem_euclid(period);
+    (if j < n as isize { j } else { period - j }) as usize
 }
 
 pub(super) fn align_up(x: usize, a: usize) -> usize {
     x.div_ceil(a) * a
+}
+
+/// The `w × h` window whose top-left corner is at padded coordinates (x0, y0); padded
+/// coordinate p maps to image coordinate reflect(p − pad).
+/// Descriptors are cut only if `descriptors` (the tiled pass reads precomputed P-buffers).
+pub(super) fn window(img: &PreparedImage, pad: usize, x0: usize, y0: usize, w: usize, h: usize, descriptors: bool) -> PreparedImage {
+    let cols: Vec<usize> = (0..w).map(|x| reflect((x0 + x) as isize - pad as isize, img.width)).collect();
+    let rows: Vec<usize> = (0..h).map(|y| reflect((y0 + y) as isize - pad as isize, img.height)).collect();
+    let n = img.width * img.height;
+    let cut = |src: &[f32], planes: usize| -> Vec<f32> {
+        let mut out = Vec::with_capacity(planes * w * h);
+        for p in 0..planes {
+            let plane = &src[p * n..(p + 1) * n];
+            for &r in &rows {
+                let row = &plane[r * img.width..(r + 1) * img.width];
+                out.extend(cols.iter().map(|&c| row[c]));
+            }
+        }
+        out
+    };
+    PreparedImage {
+        width: w,
+        height: h,
+        spp: img.spp,
+        diffuse: cut(&img.diffuse, COLOUR_BLOCK),
+        specular: cut(&img.specular, COLOUR_BLOCK),
+        g_block: cut(&img.g_block, G_BLOCK),
+        path_weight: cut(&img.path_weight, 1),
+        descriptors: if descriptors {
+            let pixels: Vec<usize> = rows.iter().flat_map(|&r| cols.iter().map(move |&c| r * img.width + c)).collect();
+            img.descriptor_columns(&pixels)
+        } else {
+            None
+        },
+        records: None,
+        passthrough: Vec::new(),
+    }
 }
 
 /// Where a window of `size` pixels goes so that it contains the block starting at padded

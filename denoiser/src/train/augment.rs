@@ -2,15 +2,13 @@
 //! applied to a training patch consistently: every buffer is moved with the image, the
 //! screen-space normals are rotated with it, and the forward-difference gradient channels are
 //! recomputed from the moved planes — including across the patch edge, from the image around the
-//! patch — so an augmented patch is exactly the patch of the augmented image. Patches may reach
-//! past the image's edges into its mirror extension ([`crate::preprocess::window`]), which
-//! commutes with the symmetries.
+//! patch — so an augmented patch is exactly the patch of the augmented image.
 //!
 //! A symmetry T maps patch-local coordinates (x, y) (y down) by: transpose if bit 0
 //! ((x, y) → (y, x)), then mirror x if bit 1, then mirror y if bit 2. The augmented patch is
 //! J(T(q)) = I(q).
 
-use crate::preprocess::window::{cut_window, WindowMap};
+use crate::kpcn::channels::{COLOUR_BLOCK, G_BLOCK};
 use crate::preprocess::{PreparedImage, PreparedTarget, DESCRIPTOR_CHANNELS};
 
 /// One of the 8 symmetries of the square; 0 is the identity.
@@ -82,36 +80,78 @@ impl Dihedral {
     }
 }
 
-/// Window map of a training patch: patch pixel (u, v), after the symmetry, reads the image at
-/// the patch corner plus T⁻¹(u, v); normals turn with T.
-struct PatchMap {
-    x: isize,
-    y: isize,
-    p: usize,
-    t: Dihedral,
-}
+/// Base planes of a block and the positions of their gradient planes: (base plane, x-gradient
+/// plane, y-gradient plane) triples; the rest (variances) are moved as they are.
+const COLOUR_GRADIENTS: [(usize, usize, usize); 3] = [(0, 4, 7), (1, 5, 8), (2, 6, 9)];
+const G_GRADIENTS: [(usize, usize, usize); 7] = [(0, 4, 7), (1, 5, 8), (2, 6, 9), (10, 12, 13), (14, 18, 21), (15, 19, 22), (16, 20, 23)];
+const G_NORMAL: usize = 0;
 
-impl WindowMap for PatchMap {
-    fn source(&self, u: isize, v: isize) -> (isize, isize) {
-        let (sx, sy) = self.t.source(u, v, self.p);
-        (self.x + sx, self.y + sy)
+/// The `p × p` patch at (x, y) of `img`, moved by `t`, its gradients recomputed (see the module
+/// comment). `descriptors`: the image's normalised descriptor planes `[S_img, 36, H, W]` and the
+/// sample count to cut (a prefix), or `None` to cut none.
+pub fn cut_image(img: &PreparedImage, descriptors: Option<(&[f32], usize)>, x: usize, y: usize, p: usize, t: Dihedral) -> PreparedImage {
+    let (w, h) = (img.width, img.height);
+    assert!(x + p <= w && y + p <= h, "patch {p}² at ({x},{y}) outside {w}×{h}");
+    let n = w * h;
+    // Source pixel index for augmented coordinates (u, v) ∈ [−1, p)², or None outside the image.
+    let src = |u: isize, v: isize| -> Option<usize> {
+        let (sx, sy) = t.source(u, v, p);
+        let (ix, iy) = (x as isize + sx, y as isize + sy);
+        (ix >= 0 && iy >= 0 && (ix as usize) < w && (iy as usize) < h).then(|| iy as usize * w + ix as usize)
+    };
+    let index: Vec<usize> = (0..p as isize).flat_map(|v| (0..p as isize).map(move |u| (u, v))).map(|(u, v)| src(u, v).unwrap()).collect();
+    let moved = |buf: &[f32], plane: usize| -> Vec<f32> { index.iter().map(|&i| buf[plane * n + i]).collect() };
+    let block = |buf: &[f32], planes: usize, grads: &[(usize, usize, usize)], normal: Option<usize>| -> Vec<f32> {
+        let mut out = vec![0.0f32; planes * p * p];
+        let is_grad = |c: usize| grads.iter().any(|g| g.1 == c || g.2 == c);
+        for c in (0..planes).filter(|&c| !is_grad(c)) {
+            out[c * p * p..(c + 1) * p * p].copy_from_slice(&moved(buf, c));
+        }
+        // The value of base plane c at augmented (u, v), reading outside the patch as needed.
+        let value = |c: usize, u: isize, v: isize| -> Option<f32> {
+            let i = src(u, v)?;
+            Some(match normal {
+                Some(n0) if (n0..n0 + 2).contains(&c) => {
+                    let (a, b) = t.normal(buf[n0 * n + i], buf[(n0 + 1) * n + i]);
+                    if c == n0 { a } else { b }
+                }
+                _ => buf[c * n + i],
+            })
+        };
+        if let Some(n0) = normal {
+            for v in 0..p {
+                for u in 0..p {
+                    for c in [n0, n0 + 1] {
+                        out[c * p * p + v * p + u] = value(c, u as isize, v as isize).unwrap();
+                    }
+                }
+            }
+        }
+        for &(base, gx, gy) in grads {
+            for v in 0..p as isize {
+                for u in 0..p as isize {
+                    let here = value(base, u, v).unwrap();
+                    let k = (v as usize) * p + u as usize;
+                    out[gx * p * p + k] = value(base, u - 1, v).map_or(0.0, |l| here - l);
+                    out[gy * p * p + k] = value(base, u, v - 1).map_or(0.0, |a| here - a);
+                }
+            }
+        }
+        out
+    };
+    let descriptors = descriptors.map(|(d, s)| (0..s * DESCRIPTOR_CHANNELS).flat_map(|plane| moved(d, plane)).collect());
+    PreparedImage {
+        width: p,
+        height: p,
+        spp: img.spp,
+        diffuse: block(&img.diffuse, COLOUR_BLOCK, &COLOUR_GRADIENTS, None),
+        specular: block(&img.specular, COLOUR_BLOCK, &COLOUR_GRADIENTS, None),
+        g_block: block(&img.g_block, G_BLOCK, &G_GRADIENTS, Some(G_NORMAL)),
+        path_weight: moved(&img.path_weight, 0),
+        descriptors,
+        records: None,
+        passthrough: if img.passthrough.is_empty() { Vec::new() } else { index.iter().map(|&i| img.passthrough[i]).collect() },
     }
-    fn normal(&self, nx: f32, ny: f32) -> (f32, f32) {
-        self.t.normal(nx, ny)
-    }
-}
-
-/// The `p × p` patch whose top-left corner is at image coordinates (x, y), moved by `t`. The
-/// patch may reach past the image's edges: it then reads the mirror-extended image, exactly as
-/// inference's padded windows do ([`cut_window`]), and the gradients are recomputed from the
-/// moved planes, so an augmented patch is the patch of the augmented image.
-/// `descriptors`: the image's normalised descriptor planes `[S_img, 36, H, W]` and the sample
-/// count to cut (a prefix), or `None` to cut none.
-pub fn cut_image(img: &PreparedImage, descriptors: Option<(&[f32], usize)>, x: isize, y: isize, p: usize, t: Dihedral) -> PreparedImage {
-    let (mut patch, index) = cut_window(img, &PatchMap { x, y, p, t }, p, p);
-    let n = img.width * img.height;
-    patch.descriptors = descriptors.map(|(d, s)| (0..s * DESCRIPTOR_CHANNELS).flat_map(|plane| index.iter().map(move |&i| d[plane * n + i])).collect());
-    patch
 }
 
 /// The `o × o` target window at (x, y), moved by `t` (plain planes: no vectors, no gradients).
@@ -132,7 +172,6 @@ pub fn cut_target(t_img: &PreparedTarget, x: usize, y: usize, o: usize, t: Dihed
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kpcn::channels::{COLOUR_BLOCK, G_BLOCK};
     use crate::rng::SplitMix64;
 
     fn random_image(w: usize, h: usize, s: usize, seed: u64) -> PreparedImage {
@@ -216,24 +255,7 @@ mod tests {
                 (corners.iter().map(|c| c.0).min().unwrap() as usize, corners.iter().map(|c| c.1).min().unwrap() as usize)
             };
             let wd = whole.descriptors.clone().unwrap();
-            assert_eq!(cut_image(&img, Some((&d, 2)), 2, 3, 6, t), cut_image(&whole, Some((&wd, 2)), u0 as isize, v0 as isize, 6, Dihedral::IDENTITY), "{t:?}");
-        }
-    }
-
-    /// The same holds for a patch that reaches past the image's corner: augmenting the
-    /// mirror-extended image (normals flipped in the mirrored part) commutes with the symmetries.
-    #[test]
-    fn patch_past_the_edge_of_augmented_image() {
-        let img = random_image(12, 12, 2, 5);
-        let d = img.descriptors.clone().unwrap();
-        for t in Dihedral::all() {
-            let whole = cut_image(&img, Some((&d, 2)), 0, 0, 12, t);
-            let wd = whole.descriptors.clone().unwrap();
-            for (x, y) in [(-3isize, -2isize), (9, 8), (-4, 7)] {
-                let corners = [(x, y), (x + 5, y), (x, y + 5), (x + 5, y + 5)].map(|(a, b)| t.forward(a, b, 12));
-                let (u0, v0) = (corners.iter().map(|c| c.0).min().unwrap(), corners.iter().map(|c| c.1).min().unwrap());
-                assert_eq!(cut_image(&img, Some((&d, 2)), x, y, 6, t), cut_image(&whole, Some((&wd, 2)), u0, v0, 6, Dihedral::IDENTITY), "{t:?} at ({x},{y})");
-            }
+            assert_eq!(cut_image(&img, Some((&d, 2)), 2, 3, 6, t), cut_image(&whole, Some((&wd, 2)), u0, v0, 6, Dihedral::IDENTITY), "{t:?}");
         }
     }
 

@@ -41,9 +41,6 @@ pub struct LoadOptions {
     pub spps: Vec<usize>,
     pub descriptors: bool,
     pub patch: usize,
-    /// The model's margin: patches are drawn by their output window (`patch − 2·margin`), which
-    /// covers the whole image, so the input may reach up to `margin` past its edges.
-    pub margin: usize,
     pub sampling: Sampling,
     /// At most this many training shots (None = all), for quick runs.
     pub max_train: Option<usize>,
@@ -125,12 +122,8 @@ pub fn load_shot(root: &Path, dir: &str, spps: &[usize], opts: &LoadOptions) -> 
     if w < opts.patch || h < opts.patch {
         return Err(err(&d, format!("{w}×{h} is smaller than the {}² patch", opts.patch)));
     }
-    if opts.patch <= 2 * opts.margin {
-        return Err(err(&d, format!("the {}² patch leaves no output with a {} px margin", opts.patch, opts.margin)));
-    }
-    let out = opts.patch - 2 * opts.margin;
     let sampler = match opts.sampling {
-        Sampling::Uniform => PatchSampler::uniform(w, h, out),
+        Sampling::Uniform => PatchSampler::uniform(w, h, opts.patch),
         Sampling::Importance => {
             let n = w * h;
             let normal = reference.normal.as_ref().map(|b| b.mean.clone()).unwrap_or_else(|| vec![0.0; 3 * n]);
@@ -153,7 +146,7 @@ pub fn load_shot(root: &Path, dir: &str, spps: &[usize], opts: &LoadOptions) -> 
                 None => vec![[0.0; 3]; n],
             };
             let m = patches::importance_map(&reference.radiance.mean, &normal, &bounce0, w, h, patches::sigma_for(w, h));
-            PatchSampler::from_map(&m, w, h, out)
+            PatchSampler::from_map(&m, w, h, opts.patch)
         }
     };
     Ok(Shot { name: dir.to_string(), images, descriptors, target, sampler })
@@ -212,10 +205,8 @@ impl Dataset {
 pub struct PatchRef {
     pub shot: usize,
     pub spp: usize,
-    /// Input corner in image coordinates; negative (or past the far edge) where the patch
-    /// reaches into the mirror-extended border.
-    pub x: isize,
-    pub y: isize,
+    pub x: usize,
+    pub y: usize,
     pub t: Dihedral,
 }
 
@@ -226,9 +217,7 @@ pub fn cut(shot: &Shot, r: &PatchRef, spp: usize, patch: usize, margin: usize, w
     let desc = if with_descriptors { shot.descriptors.as_deref().map(|d| (d, spp)) } else { None };
     let crop = augment::cut_image(img, desc, r.x, r.y, patch, r.t);
     let o = patch - 2 * margin;
-    let (tx, ty) = (r.x + margin as isize, r.y + margin as isize);
-    assert!(tx >= 0 && ty >= 0, "output window at ({tx},{ty}) starts outside the image");
-    let t = augment::cut_target(&shot.target, tx as usize, ty as usize, o, r.t);
+    let t = augment::cut_target(&shot.target, r.x + margin, r.y + margin, o, r.t);
     (crop, t)
 }
 

@@ -248,15 +248,13 @@ fn stage_seed(seed: u64, k: usize) -> u64 {
 /// shapes), shots uniform, corners from each shot's sampler.
 pub fn draw_batch(data: &Dataset, opts: &TrainOptions, k: usize, step: usize) -> (Vec<PatchRef>, SplitMix64) {
     let mut rng = SplitMix64::derive(stage_seed(opts.seed, k), step as u64);
-    let margin = opts.config.margin() as isize;
     let spp = rng.below(data.spps.len());
     let refs = (0..opts.batch)
         .map(|_| {
             let shot = rng.below(data.train.len());
-            // The sampler draws output windows; the input reaches `margin` around them.
             let (x, y) = data.train[shot].sampler.sample(&mut rng);
             let t = if opts.augment { Dihedral(rng.below(8) as u8) } else { Dihedral::IDENTITY };
-            PatchRef { shot, spp, x: x as isize - margin, y: y as isize - margin, t }
+            PatchRef { shot, spp, x, y, t }
         })
         .collect();
     (refs, rng)
@@ -318,7 +316,7 @@ pub fn validate(model: &MethodModel, data: &Dataset, opts: &TrainOptions) -> Opt
     for shot in 0..data.val.len() {
         for spp in 0..data.spps.len() {
             for &(x, y) in &grid {
-                refs.push(PatchRef { shot, spp, x: x as isize, y: y as isize, t: Dihedral::IDENTITY });
+                refs.push(PatchRef { shot, spp, x, y, t: Dihedral::IDENTITY });
             }
         }
     }

@@ -125,9 +125,7 @@ impl Sampling {
     }
 }
 
-/// Draws top-left corners of `patch`² windows inside a `w × h` image. Training draws the
-/// output windows (the input patch reaches a margin around them, past the image's edges where
-/// they touch one).
+/// Draws top-left corners of `patch`² windows inside a `w × h` image.
 #[derive(Clone, Debug)]
 pub struct PatchSampler {
     /// Positions per row: w − patch + 1.
@@ -142,8 +140,8 @@ impl PatchSampler {
         PatchSampler { nx: w + 1 - patch, ny: h + 1 - patch, cdf: Vec::new() }
     }
 
-    /// A corner's weight is the map at the window's centre (the reference code crops M by half
-    /// a patch per side and uses the index as the corner; input and output windows share it). Falls back to uniform when the map has
+    /// A corner's weight is the map at the patch centre (the reference code crops M by half a
+    /// patch per side and uses the index as the corner). Falls back to uniform when the map has
     /// no positive finite mass.
     pub fn from_map(map: &[f32], w: usize, h: usize, patch: usize) -> Self {
         let (nx, ny) = (w + 1 - patch, h + 1 - patch);

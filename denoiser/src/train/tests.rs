@@ -68,7 +68,7 @@ fn shot(name: &str, seed: u64, spps: &[usize]) -> Shot {
     let mut reference = noisy(&mut rng, 1_000_000);
     reference.radiance.mean = refc.clone();
     reference.diffuse.as_mut().unwrap().mean = refc.iter().map(|x| x * 0.7).collect();
-    Shot { name: name.into(), images, descriptors, target: prepare_target(&reference).unwrap(), sampler: PatchSampler::uniform(W, W, PATCH - 2 * tiny().margin()) }
+    Shot { name: name.into(), images, descriptors, target: prepare_target(&reference).unwrap(), sampler: PatchSampler::uniform(W, W, PATCH) }
 }
 
 fn dataset() -> Dataset {
@@ -145,32 +145,6 @@ fn tiny_model_fits_a_fixed_batch() {
     }
     let (first, last) = (losses[0], *losses.last().unwrap());
     assert!(last < 0.8 * first, "loss {first} → {last}: {losses:?}");
-}
-
-/// Drawn patches cover the whole image with their outputs, so their inputs reach up to the
-/// margin past every edge (read from the mirror-extended image, as inference reads its pad),
-/// and never farther. 800 uniform corner draws over 9 + 2m positions per axis miss an extreme
-/// with probability below 2·(1 − 1/11)^800 < 1e-30 for any m ≥ 1.
-#[test]
-fn patches_reach_past_the_edges_by_the_margin() {
-    let data = dataset();
-    let o = options(Method::G, None, &short());
-    let m = o.config.margin() as isize;
-    assert!(m > 0, "the test needs a model with a margin");
-    let (mut lo, mut hi) = (isize::MAX, isize::MIN);
-    for step in 0..200 {
-        for r in draw_batch(&data, &o, 0, step).0 {
-            for c in [r.x, r.y] {
-                assert!(c >= -m && c + PATCH as isize <= W as isize + m, "corner {c} with margin {m}");
-                lo = lo.min(c);
-                hi = hi.max(c + PATCH as isize);
-            }
-            // The cut reads the extended image there; its output window is inside the image.
-            let (img, tgt) = crate::train::data::cut(&data.train[r.shot], &r, data.spps[r.spp], PATCH, m as usize, false);
-            assert_eq!((img.width, tgt.width), (PATCH, PATCH - 2 * m as usize));
-        }
-    }
-    assert_eq!((lo, hi), (-m, W as isize + m));
 }
 
 /// Training N steps straight equals N/2, a checkpoint, a fresh process state, and N/2 more —
