@@ -98,15 +98,16 @@ pub struct MethodModel {
 }
 
 impl BranchNets {
+    /// `branch_seed` 1 is the diffuse branch, 2 the specular one.
     fn init(config: &DenoiserConfig, method: Method, branch_seed: u64, device: &Device) -> Self {
         // Seeds per network, not per method, so a guided model starts from the very D_G / D_P a
         // G or P model of the same seed starts from.
         let s = config.seed.wrapping_mul(0x9E37_79B9).wrapping_add(branch_seed.wrapping_mul(100));
         let uses = |m: &[Method]| m.contains(&method);
         BranchNets {
-            d_g: uses(&[Method::G, Method::Guided]).then(|| config.init_column(Variant::G, s + 1, device)),
-            d_p: uses(&[Method::P, Method::Guided]).then(|| config.init_column(Variant::P, s + 2, device)),
-            d_gp: uses(&[Method::Both]).then(|| config.init_column(Variant::GP, s + 5, device)),
+            d_g: uses(&[Method::G, Method::Guided]).then(|| config.init_column(Variant::G, branch_seed == 1, s + 1, device)),
+            d_p: uses(&[Method::P, Method::Guided]).then(|| config.init_column(Variant::P, branch_seed == 1, s + 2, device)),
+            d_gp: uses(&[Method::Both]).then(|| config.init_column(Variant::GP, branch_seed == 1, s + 5, device)),
             path: method.needs_descriptors().then(|| config.pathnet.init(s + 3, device)),
             e: uses(&[Method::Guided]).then(|| config.ensemble.init(s + 4, device)),
         }

@@ -112,13 +112,13 @@ impl DenoiserConfig {
 
     /// `edge` with the colour guides measured in units of the colour's noise instead of
     /// brighter-only log differences, by a test that is two-sided at 2 spp and fades toward
-    /// Rousselle's one-sided one as the samples grow
-    /// ([`EdgeStopping::FeaturesAndFadingTwoSidedNoisyColour`]). Weight files of the one-sided
-    /// (2026-11-25, afternoon) and the two-sided form (evening) keep theirs: the variant is
-    /// stored in each file's config.
+    /// Rousselle's one-sided one as the samples grow, except where a pixel is black
+    /// ([`EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack`]). Weight files of the
+    /// one-sided (2026-11-25, afternoon), the two-sided (evening) and the fading form
+    /// (2026-11-26, morning) keep theirs: the variant is stored in each file's config.
     pub fn edge_noise() -> Self {
         let mut c = Self::edge();
-        c.mskp = c.mskp.map(|m| m.with_edge_stopping(EdgeStopping::FeaturesAndFadingTwoSidedNoisyColour));
+        c.mskp = c.mskp.map(|m| m.with_edge_stopping(EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack));
         c
     }
 
@@ -161,10 +161,16 @@ impl DenoiserConfig {
     }
 
     pub fn mskp_for(&self, v: Variant) -> Option<MsKpConfig> {
+        self.mskp_for_branch(v, true)
+    }
+
+    /// [`Self::mskp_for`] for the diffuse (`diffuse`) or the specular branch: the guides differ
+    /// only under [`EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack`].
+    pub fn mskp_for_branch(&self, v: Variant, diffuse: bool) -> Option<MsKpConfig> {
         self.mskp.clone().map(|mut c| {
             c.in_channels = v.in_channels();
             if c.edge_stopping != EdgeStopping::Off {
-                c.guides = edge_guides(v, c.edge_stopping);
+                c.guides = edge_guides(v, c.edge_stopping, diffuse);
             }
             c
         })
@@ -176,7 +182,7 @@ impl DenoiserConfig {
 /// kept every firefly: validation relMSE 0.41–1.07 where plain kernels had 0.015); then what the
 /// variant adds: normal, depth (×20: it is path length over 10 scene radii, so neighbours differ
 /// by hundredths) and albedo for G, the path features f_P for P.
-fn edge_guides(v: Variant, stopping: EdgeStopping) -> Vec<GuideGroup> {
+fn edge_guides(v: Variant, stopping: EdgeStopping, diffuse: bool) -> Vec<GuideGroup> {
     use crate::kpcn::channels::*;
     let colour = match stopping {
         EdgeStopping::FeaturesAndColour => Some(GuideGroup::new(0, 3, 1.0, true).brighter_only()),
@@ -186,15 +192,21 @@ fn edge_guides(v: Variant, stopping: EdgeStopping) -> Vec<GuideGroup> {
         // mskp::pooled_variance). The pooled one starts at e^−3, where a jump of 3σ in every
         // channel keeps ~30 % of a tap's weight and one of 10σ none, so it acts from the first
         // step; the own one at e^−5, to be raised where the network finds it reliable.
-        EdgeStopping::FeaturesAndNoisyColour | EdgeStopping::FeaturesAndTwoSidedNoisyColour | EdgeStopping::FeaturesAndFadingTwoSidedNoisyColour => {
+        EdgeStopping::FeaturesAndNoisyColour | EdgeStopping::FeaturesAndTwoSidedNoisyColour | EdgeStopping::FeaturesAndFadingTwoSidedNoisyColour | EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack => {
             let mut own = GuideGroup::new(0, 3, 1.0, false).with_variance(3).with_init_log_strength(-5.0);
             let mut pooled = GuideGroup::new(0, 3, 1.0, false).with_pooled_variance(3).with_init_log_strength(-3.0);
             match stopping {
                 EdgeStopping::FeaturesAndTwoSidedNoisyColour => (own, pooled) = (own.two_sided(), pooled.two_sided()),
                 EdgeStopping::FeaturesAndFadingTwoSidedNoisyColour => (own, pooled) = (own.two_sided_fading(), pooled.two_sided_fading()),
+                // Black diffuse light is an accident of few samples (veach-ajar at 4 spp); black
+                // specular light is mostly a surface without a specular lobe, a fact at any
+                // sample count (the brick wall beside wire-fence's glinting wires: doubting it
+                // there took g from 0.0063 to 0.0077 at 32 spp, docs/denoiser.md).
+                EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack if diffuse => (own, pooled) = (own.two_sided_fading_doubting_black(), pooled.two_sided_fading_doubting_black()),
+                EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack => (own, pooled) = (own.two_sided_fading(), pooled.two_sided_fading()),
                 _ => {}
             }
-            return [own, pooled].into_iter().chain(edge_guides(v, EdgeStopping::Features)).collect();
+            return [own, pooled].into_iter().chain(edge_guides(v, EdgeStopping::Features, diffuse)).collect();
         }
         EdgeStopping::Features | EdgeStopping::Off => None,
     };
@@ -210,9 +222,10 @@ fn edge_guides(v: Variant, stopping: EdgeStopping) -> Vec<GuideGroup> {
 }
 
 impl DenoiserConfig {
-    /// A fresh column of `variant` (deterministic in `seed`).
-    pub fn init_column(&self, v: Variant, seed: u64, device: &Device) -> Column {
-        match self.mskp_for(v) {
+    /// A fresh column of `variant` for the diffuse (`diffuse`) or specular branch (deterministic
+    /// in `seed`).
+    pub fn init_column(&self, v: Variant, diffuse: bool, seed: u64, device: &Device) -> Column {
+        match self.mskp_for_branch(v, diffuse) {
             Some(c) => Column::mskp(c.init(seed, device)),
             None => self.kpcn_for(v).init(seed, device),
         }

@@ -32,8 +32,12 @@ pub enum EdgeStopping {
     /// As `FeaturesAndTwoSidedNoisyColour`, with the two-sided share fading as 1/(N − 1) at N
     /// spp ([`GuideGroup::two_sided_fades`]): two-sided at 2 spp, where a zero variance says
     /// nothing, and nearly Rousselle's one-sided test at 32–64 spp, where it is sound. The
-    /// `edge-noise` preset since 2026-11-26.
+    /// `edge-noise` preset of 2026-11-26, morning.
     FeaturesAndFadingTwoSidedNoisyColour,
+    /// As `FeaturesAndFadingTwoSidedNoisyColour`, in the diffuse branch two-sided at any sample
+    /// count wherever the centre pixel is black ([`GuideGroup::doubt_black`]): the `edge-noise`
+    /// preset since 2026-11-26, afternoon.
+    FeaturesAndFadingNoisyColourDoubtingBlack,
 }
 
 /// Input channels `start..start + len` used as an edge-stopping guide, multiplied by `scale`
@@ -86,11 +90,19 @@ pub struct GuideGroup {
     /// reports. Files without the field keep the full two-sided test.
     #[serde(default)]
     pub two_sided_fades: bool,
+    /// With `two_sided_fades`: the full two-sided test wherever the centre pixel is black (every
+    /// sample found no light), at any sample count. N black samples say nothing about the
+    /// pixel's variance: on veach-ajar at 4 spp most pixels still see no light, and the fading
+    /// share (1/3) let them refuse their lit neighbours (docs/denoiser.md). A wall beside a
+    /// glinting wire at 64 spp is lit, so it keeps the fading, nearly one-sided test. Files
+    /// without the field fade everywhere.
+    #[serde(default)]
+    pub doubt_black: bool,
 }
 
 impl GuideGroup {
     pub fn new(start: usize, len: usize, scale: f64, log: bool) -> Self {
-        GuideGroup { start, len, scale, log, brighter_only: false, variance: None, init_log_strength: None, pooled_variance: false, two_sided: false, two_sided_fades: false }
+        GuideGroup { start, len, scale, log, brighter_only: false, variance: None, init_log_strength: None, pooled_variance: false, two_sided: false, two_sided_fades: false, doubt_black: false }
     }
 
     pub fn brighter_only(self) -> Self {
@@ -118,6 +130,11 @@ impl GuideGroup {
         GuideGroup { two_sided: true, two_sided_fades: true, ..self }
     }
 
+    /// The fading test, two-sided wherever the centre is black ([`GuideGroup::doubt_black`]).
+    pub fn two_sided_fading_doubting_black(self) -> Self {
+        GuideGroup { doubt_black: true, ..self.two_sided_fading() }
+    }
+
     pub fn with_init_log_strength(self, s: f32) -> Self {
         GuideGroup { init_log_strength: Some(s), ..self }
     }
@@ -132,13 +149,15 @@ pub struct GuideLevel {
     brighter_only: bool,
     /// Share of the two-sided test in the subtraction (0: one-sided; [`GuideGroup::two_sided_fades`]).
     two_sided_share: f32,
+    /// [`GuideGroup::doubt_black`].
+    doubt_black: bool,
 }
 
 impl GuideLevel {
     /// The next coarser level: 2×2 box means, whose variance is a quarter of the mean variance
     /// (independent pixels).
     pub(super) fn down(&self) -> Self {
-        GuideLevel { x: box_down(self.x.clone()), var: self.var.clone().map(|v| box_down(v).div_scalar(4.0)), brighter_only: self.brighter_only, two_sided_share: self.two_sided_share }
+        GuideLevel { x: box_down(self.x.clone()), var: self.var.clone().map(|v| box_down(v).div_scalar(4.0)), brighter_only: self.brighter_only, two_sided_share: self.two_sided_share, doubt_black: self.doubt_black }
     }
 }
 
@@ -158,7 +177,7 @@ const TWO_SIDED_NOISE_FACTOR: f32 = 2.0;
 /// Guide distances between taps q `[B, C, T, N]` (variances `[B, 1, T, N]`) and centres p
 /// `[B, C, 1, N]` (`[B, 1, 1, N]`) → `[B, T, N]`.
 fn guide_distance(q: Tensor<4>, p: Tensor<4>, var: Option<(Tensor<4>, Tensor<4>)>, g: &GuideLevel) -> Tensor<3> {
-    let diff = q - p;
+    let diff = q - p.clone();
     let diff = if g.brighter_only { diff.clamp_min(0.0) } else { diff };
     let d2 = diff.square();
     match var {
@@ -172,6 +191,12 @@ fn guide_distance(q: Tensor<4>, p: Tensor<4>, var: Option<(Tensor<4>, Tensor<4>)
             let w = g.two_sided_share;
             let explained = if w >= 1.0 {
                 two_sided()
+            } else if g.doubt_black {
+                // Share 1 where the centre is black (a coarse level's centre only if all of its
+                // fine pixels are: box means of non-negative values), w elsewhere.
+                let black = p.clone().abs().sum_dim(1).lower_equal_elem(0.0).float();
+                let share = black.mul_scalar(1.0 - w).add_scalar(w);
+                two_sided() * share.clone() + one_sided() * share.neg().add_scalar(1.0)
             } else if w <= 0.0 {
                 one_sided()
             } else {
@@ -236,7 +261,7 @@ pub(super) fn guide_features(input: &Tensor<4>, guides: &[GuideGroup], spp: usiz
                 let v = if g.pooled_variance { pooled_variance(v) } else { v };
                 v.mul_scalar(g.scale * g.scale)
             });
-            GuideLevel { x: x.mul_scalar(g.scale), var, brighter_only: g.brighter_only, two_sided_share: two_sided_share(g, spp) }
+            GuideLevel { x: x.mul_scalar(g.scale), var, brighter_only: g.brighter_only, two_sided_share: two_sided_share(g, spp), doubt_black: g.two_sided && g.doubt_black }
         })
         .collect()
 }

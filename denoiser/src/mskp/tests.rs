@@ -299,6 +299,36 @@ fn two_sided_noise_test_keeps_the_brightness_of_a_sparse_2spp_image() {
     assert!(one_sided < -0.05, "the one-sided form should darken a sparse image ({one_sided})");
 }
 
+/// The same sparse image at 4 spp (a lit pixel saw one bright sample of four: mean m, variance
+/// of the mean 3m²/4), the way most of veach-ajar still looks at 4 spp. The fading test keeps a
+/// third of the two-sided subtraction there, so black pixels refuse their lit neighbours and the
+/// image darkens; doubting black centres keeps the two-sided test where it matters and the mean.
+#[test]
+fn doubting_black_centres_keeps_the_brightness_of_a_sparse_4spp_image() {
+    let side = 32;
+    let n = side * side;
+    let mut rng = SplitMix64::new(11);
+    let lit: Vec<bool> = (0..n).map(|_| rng.below(6) == 0).collect();
+    let m = 3.0;
+    let x: Vec<f64> = (0..4 * n).map(|i| match (i / n, lit[i % n]) { (_, false) => 0.0, (3, true) => 0.75 * m * m, (_, true) => m }).collect();
+    let mean_change = |group: GuideGroup| {
+        let (out, cfg) = box_kernels_with_guide(&x, side, 4, group, 0.0);
+        let o = side - 2 * cfg.margin;
+        let boxed = |i: usize| {
+            let (y, xx) = (i / o + cfg.margin, i % o + cfg.margin);
+            let taps = (0..9).filter(|t| lit[(y + t / 3 - 1) * side + xx + t % 3 - 1]).count();
+            taps as f64 * m / 9.0
+        };
+        let before = (0..o * o).map(boxed).sum::<f64>() / (o * o) as f64;
+        let after = out[..o * o].iter().sum::<f64>() / (o * o) as f64;
+        after / before - 1.0
+    };
+    let fading = mean_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3).two_sided_fading());
+    let doubting = mean_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3).two_sided_fading_doubting_black());
+    assert!(doubting.abs() < 1e-5, "doubting black centres changed the mean brightness by {doubting}");
+    assert!(fading < -0.05, "the fading test should darken a sparse 4-spp image ({fading})");
+}
+
 /// A firefly at 64 spp: one sample of 64 hit a bright caustic, so the pixel's mean is up by
 /// Δ = S/64 and its variance of the mean is about Δ². Its neighbours (0.5, variance 10⁻⁶) must
 /// not take it in: the one-sided test explains only what the neighbour's own noise adds
