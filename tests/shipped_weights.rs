@@ -91,14 +91,14 @@ fn shipped_swap_guided_model_beats_the_noisy_render() {
 }
 
 /// The opt-in edge-noise models (preset `edge-noise`, docs/denoiser.md, "Colour distances in
-/// units of the noise", "The two-sided noise test" and "The fading two-sided test"): their files
-/// name the noise-normalised colour guides whose two-sided share fades with the sample count,
-/// and they run with them.
+/// units of the noise", "The two-sided noise test", "The fading two-sided test" and "Doubting
+/// black diffuse pixels"): their files name the noise-normalised colour guides whose two-sided
+/// share fades with the sample count except on black diffuse pixels, and they run with them.
 #[test]
 fn shipped_edge_noise_guided_model_beats_the_noisy_render() {
     let l = denoiser::weights::load(&root().join("denoiser/weights/edge-noise/guided-default.safetensors"), &denoiser::cpu_device()).unwrap();
     let m = l.config.mskp.as_ref().expect("a U-Net model");
-    assert_eq!(m.edge_stopping, denoiser::mskp::EdgeStopping::FeaturesAndFadingTwoSidedNoisyColour);
+    assert_eq!(m.edge_stopping, denoiser::mskp::EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack);
     check("edge-noise/guided-default", Method::Guided);
 }
 
@@ -108,15 +108,21 @@ fn shipped_edge_noise_guided_model_beats_the_noisy_render() {
 /// the two-sided test's g gave 0.86 and guided 0.85 (docs/denoiser.md, "The two-sided noise
 /// test"), the fading test's (shipped) 0.78 and 0.78. The bar of 0.75 sits above the one-sided
 /// models: a model that darkens sparse images again fails.
+///
+/// At 4 spp most of veach-ajar is still black. The fading test alone gave 0.78 (g) and 0.785
+/// (guided) there; doubting black diffuse pixels 0.82 and 0.83 with the same networks
+/// (docs/denoiser.md, "Doubting black diffuse pixels"). The bar of 0.80 sits between.
 #[test]
-fn shipped_edge_noise_models_keep_a_sparse_2spp_image_bright() {
+fn shipped_edge_noise_models_keep_a_sparse_image_bright() {
     let lum = |c: &[f32], i: usize| 0.2126 * c[3 * i] + 0.7152 * c[3 * i + 1] + 0.0722 * c[3 * i + 2];
-    for (stem, method) in [("g-default", Method::G), ("guided-default", Method::Guided)] {
-        let (_, out, reference) = render_and_denoise("veach-ajar/scene.xml", "veach-ajar", 2, &format!("edge-noise/{stem}"), method);
-        let mut ratios: Vec<f32> = (0..out.len() / 3).map(|i| lum(&out, i) / lum(&reference.radiance.mean, i).max(1e-6)).collect();
-        ratios.sort_by(f32::total_cmp);
-        let median = ratios[ratios.len() / 2];
-        println!("edge-noise/{stem}: median brightness ratio {median:.3}");
-        assert!(median > 0.75, "edge-noise/{stem} darkened veach-ajar at 2 spp to {median:.3} of the reference");
+    for (spp, bar) in [(2, 0.75), (4, 0.80)] {
+        for (stem, method) in [("g-default", Method::G), ("guided-default", Method::Guided)] {
+            let (_, out, reference) = render_and_denoise("veach-ajar/scene.xml", "veach-ajar", spp, &format!("edge-noise/{stem}"), method);
+            let mut ratios: Vec<f32> = (0..out.len() / 3).map(|i| lum(&out, i) / lum(&reference.radiance.mean, i).max(1e-6)).collect();
+            ratios.sort_by(f32::total_cmp);
+            let median = ratios[ratios.len() / 2];
+            println!("edge-noise/{stem} at {spp} spp: median brightness ratio {median:.3}");
+            assert!(median > bar, "edge-noise/{stem} darkened veach-ajar at {spp} spp to {median:.3} of the reference (bar {bar})");
+        }
     }
 }

@@ -410,6 +410,24 @@ mod tests {
         }
     }
 
+    /// The `edge-noise` preset's colour guides doubt a black centre only in the diffuse branch
+    /// of a model built from it: a black specular pixel is mostly a surface without a specular
+    /// lobe (docs/denoiser.md, "Doubting black diffuse pixels").
+    #[test]
+    fn edge_noise_preset_doubts_black_only_in_the_diffuse_branch() {
+        let model = MethodModel::init(&DenoiserConfig::edge_noise(), Method::Guided, &cpu_device());
+        let colour_doubts = |b: &crate::method::BranchNets| {
+            [&b.d_g, &b.d_p].map(|c| {
+                let guides = &c.as_ref().unwrap().unet.as_ref().unwrap().guides;
+                let colour: Vec<_> = guides.iter().filter(|g| g.variance.is_some()).collect();
+                assert_eq!(colour.len(), 2, "own and pooled colour guides");
+                colour.iter().map(|g| g.doubt_black && g.two_sided_fades).collect::<Vec<_>>()
+            })
+        };
+        assert_eq!(colour_doubts(&model.diffuse), [vec![true, true], vec![true, true]]);
+        assert_eq!(colour_doubts(&model.specular), [vec![false, false], vec![false, false]]);
+    }
+
     /// A tiny guided model trained 40 Adam steps on one fixed batch (all losses of the joint
     /// stage) lowers its L1, for both backbones. Threshold 0.8× initial: the fit is a
     /// memorisation task the tiny model reaches far below that within 40 steps at lr 1e-2, yet an
