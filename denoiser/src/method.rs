@@ -104,10 +104,11 @@ impl BranchNets {
         // G or P model of the same seed starts from.
         let s = config.seed.wrapping_mul(0x9E37_79B9).wrapping_add(branch_seed.wrapping_mul(100));
         let uses = |m: &[Method]| m.contains(&method);
+        let diffuse = branch_seed == 1;
         BranchNets {
-            d_g: uses(&[Method::G, Method::Guided]).then(|| config.init_column(Variant::G, branch_seed == 1, s + 1, device)),
-            d_p: uses(&[Method::P, Method::Guided]).then(|| config.init_column(Variant::P, branch_seed == 1, s + 2, device)),
-            d_gp: uses(&[Method::Both]).then(|| config.init_column(Variant::GP, branch_seed == 1, s + 5, device)),
+            d_g: uses(&[Method::G, Method::Guided]).then(|| config.init_column(Variant::G, diffuse, s + 1, device)),
+            d_p: uses(&[Method::P, Method::Guided]).then(|| config.init_column(Variant::P, diffuse, s + 2, device)),
+            d_gp: uses(&[Method::Both]).then(|| config.init_column(Variant::GP, diffuse, s + 5, device)),
             path: method.needs_descriptors().then(|| config.pathnet.init(s + 3, device)),
             e: uses(&[Method::Guided]).then(|| config.ensemble.init(s + 4, device)),
         }

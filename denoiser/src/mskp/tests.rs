@@ -272,25 +272,8 @@ fn noise_normalised_colour_guide_stops_only_at_steps_the_noise_cannot_explain() 
 /// 2026-11-24 weights).
 #[test]
 fn two_sided_noise_test_keeps_the_brightness_of_a_sparse_2spp_image() {
-    let side = 32;
-    let n = side * side;
-    let mut rng = SplitMix64::new(7);
-    let lit: Vec<bool> = (0..n).map(|_| rng.below(6) == 0).collect();
-    let m = 3.0;
-    let x: Vec<f64> = (0..4 * n).map(|i| match (i / n, lit[i % n]) { (_, false) => 0.0, (3, true) => m * m / 2.0, (_, true) => m }).collect();
-    let mean_change = |group: GuideGroup| {
-        let (out, cfg) = box_kernels_with_guide(&x, side, 2, group, 0.0);
-        let o = side - 2 * cfg.margin;
-        // What plain 3×3 box kernels give on the kept window (they read one pixel beyond it).
-        let boxed = |i: usize| {
-            let (y, xx) = (i / o + cfg.margin, i % o + cfg.margin);
-            let taps = (0..9).filter(|t| lit[(y + t / 3 - 1) * side + xx + t % 3 - 1]).count();
-            taps as f64 * m / 9.0
-        };
-        let before = (0..o * o).map(boxed).sum::<f64>() / (o * o) as f64;
-        let after = out[..o * o].iter().sum::<f64>() / (o * o) as f64;
-        after / before - 1.0
-    };
+    // A lit pixel saw one bright sample of two: mean m, variance of the mean m²/2.
+    let mean_change = |group| sparse_image_mean_change(7, 2, 0.5, group);
     let one_sided = mean_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3));
     let two_sided = mean_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3).two_sided());
     let fading = mean_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3).two_sided_fading());
@@ -305,24 +288,7 @@ fn two_sided_noise_test_keeps_the_brightness_of_a_sparse_2spp_image() {
 /// image darkens; doubting black centres keeps the two-sided test where it matters and the mean.
 #[test]
 fn doubting_black_centres_keeps_the_brightness_of_a_sparse_4spp_image() {
-    let side = 32;
-    let n = side * side;
-    let mut rng = SplitMix64::new(11);
-    let lit: Vec<bool> = (0..n).map(|_| rng.below(6) == 0).collect();
-    let m = 3.0;
-    let x: Vec<f64> = (0..4 * n).map(|i| match (i / n, lit[i % n]) { (_, false) => 0.0, (3, true) => 0.75 * m * m, (_, true) => m }).collect();
-    let mean_change = |group: GuideGroup| {
-        let (out, cfg) = box_kernels_with_guide(&x, side, 4, group, 0.0);
-        let o = side - 2 * cfg.margin;
-        let boxed = |i: usize| {
-            let (y, xx) = (i / o + cfg.margin, i % o + cfg.margin);
-            let taps = (0..9).filter(|t| lit[(y + t / 3 - 1) * side + xx + t % 3 - 1]).count();
-            taps as f64 * m / 9.0
-        };
-        let before = (0..o * o).map(boxed).sum::<f64>() / (o * o) as f64;
-        let after = out[..o * o].iter().sum::<f64>() / (o * o) as f64;
-        after / before - 1.0
-    };
+    let mean_change = |group| sparse_image_mean_change(11, 4, 0.75, group);
     let fading = mean_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3).two_sided_fading());
     let doubting = mean_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3).two_sided_fading_doubting_black());
     assert!(doubting.abs() < 1e-5, "doubting black centres changed the mean brightness by {doubting}");
@@ -412,6 +378,29 @@ fn identity_kernels_full_blend(cfg: &MsKpConfig, strength: Option<f32>) -> impl 
         }
         bias
     }
+}
+
+/// A 32² image where one pixel in six (drawn from `seed`) is lit at m = 3 with variance of the
+/// mean `lit_variance`·m², the rest black with variance 0, filtered by 3×3 box kernels stopped by
+/// `group` (strength 1) at `spp`: the relative change of the mean against plain box kernels on
+/// the kept window (which read one pixel beyond it).
+fn sparse_image_mean_change(seed: u64, spp: usize, lit_variance: f64, group: GuideGroup) -> f64 {
+    let side = 32;
+    let n = side * side;
+    let mut rng = SplitMix64::new(seed);
+    let lit: Vec<bool> = (0..n).map(|_| rng.below(6) == 0).collect();
+    let m = 3.0;
+    let x: Vec<f64> = (0..4 * n).map(|i| match (i / n, lit[i % n]) { (_, false) => 0.0, (3, true) => lit_variance * m * m, (_, true) => m }).collect();
+    let (out, cfg) = box_kernels_with_guide(&x, side, spp, group, 0.0);
+    let o = side - 2 * cfg.margin;
+    let boxed = |i: usize| {
+        let (y, xx) = (i / o + cfg.margin, i % o + cfg.margin);
+        let taps = (0..9).filter(|t| lit[(y + t / 3 - 1) * side + xx + t % 3 - 1]).count();
+        taps as f64 * m / 9.0
+    };
+    let before = (0..o * o).map(boxed).sum::<f64>() / (o * o) as f64;
+    let after = out[..o * o].iter().sum::<f64>() / (o * o) as f64;
+    after / before - 1.0
 }
 
 /// The convex-blend column with the single guide `group`, box kernels without blend at
