@@ -34,6 +34,9 @@ enum Command {
     Reference(cli::reference::ReferenceArgs),
     /// Train a denoiser (g, p, both, guided, ablations) on a dataset folder (resumable).
     Train(cli::train::TrainArgs),
+    /// Fit a trained model's guide gain (strengths × (N/2)^γ at N spp) on a dataset's
+    /// validation shots and write the model with it; the tensors are unchanged.
+    Calibrate(cli::calibrate::CalibrateArgs),
     /// Denoise a frame written by `render --aovs` (G, P, both-buffers or guided model).
     Denoise(cli::denoise::DenoiseArgs),
     /// Regenerate docs/results.md: every method on the test scenes at each spp — error tables,
@@ -66,6 +69,7 @@ fn main() {
         Command::Dataset(a) => cli::dataset::run(a),
         Command::Reference(a) => cli::reference::run(a),
         Command::Train(a) => cli::train::run(a),
+        Command::Calibrate(a) => cli::calibrate::run(a),
         Command::Denoise(a) => cli::denoise::run(a),
         Command::Eval(a) => cli::eval::run(a),
         Command::PlotTraining(a) => cli::plot_training::run(a),

@@ -142,3 +142,38 @@ fn backend_tch() {
         assert!(g.starts_with("trained g (default): 2 steps"), "{g}");
     }
 }
+
+/// `pixguide calibrate` on a validation-only dataset (`dataset --shots 0`): the shipped
+/// edge-noise g gets the best of the tried exponents written into its config, with the same
+/// tensors and a provenance note; a model without guides and a negative exponent are refused.
+#[test]
+fn calibrate_writes_the_kept_exponent_and_nothing_else() {
+    let base = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("calibrate");
+    std::fs::remove_dir_all(&base).ok();
+    let data = base.join("data");
+    let d = data.to_str().unwrap();
+    pixguide(&["dataset", "--scenes", "scenes/cornell-box/scene.toml", "--shots", "0", "--spp", "2,4", "--ref-spp", "8", "--size", "32x32", "--quiet", "-o", d]);
+    let input = "denoiser/weights/edge-noise/g-default.safetensors";
+    let out = base.join("g.safetensors");
+    let stdout = pixguide(&["calibrate", "--data", d, "--weights", input, "--exponents", "0,1", "--patch", "24", "-o", out.to_str().unwrap()]);
+    let kept: f64 = stdout.strip_prefix("kept γ = ").and_then(|s| s.split(' ').next()).and_then(|s| s.parse().ok()).unwrap_or_else(|| panic!("{stdout}"));
+    assert!(kept == 0.0 || kept == 1.0, "{stdout}");
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    assert_eq!(tensors(&out), tensors(&root.join(input)));
+    let bytes = std::fs::read(&out).unwrap();
+    let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + n]).unwrap();
+    let config: serde_json::Value = serde_json::from_str(header["__metadata__"]["pixguide.config"].as_str().unwrap()).unwrap();
+    assert_eq!(config["mskp"]["guide_gain_exponent"].as_f64(), Some(kept));
+    let provenance = header["__metadata__"].to_string();
+    assert!(provenance.contains(&format!("guide_gain_exponent 0 -> {kept}")), "{provenance}");
+    for (weights, exps, why) in [("denoiser/weights/g-default.safetensors", "--exponents=0,1", "no edge-stopping guides"), (input, "--exponents=-1", "finite values in [0, 4]")] {
+        let o = Command::new(env!("CARGO_BIN_EXE_pixguide"))
+            .args(["calibrate", "--data", d, "--weights", weights, exps, "--patch", "24", "-o", base.join("x.safetensors").to_str().unwrap()])
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(why), "{weights} {exps}: {err}");
+    }
+}

@@ -193,6 +193,18 @@ impl MethodModel {
         MethodModel { diffuse: BranchNets::init(config, method, 1, device), specular: BranchNets::init(config, method, 2, device) }
     }
 
+    /// Sets γ of every U-Net column's guide gain ([`crate::mskp::guide_gain`]); KPCN columns
+    /// have no guides. The weight file keeps it in `config.mskp.guide_gain_exponent`.
+    pub fn set_guide_gain_exponent(&mut self, exponent: f64) {
+        for b in [&mut self.diffuse, &mut self.specular] {
+            for c in [&mut b.d_g, &mut b.d_p, &mut b.d_gp].into_iter().flatten() {
+                if let Some(u) = &mut c.unet {
+                    u.guide_gain_exponent = exponent;
+                }
+            }
+        }
+    }
+
     pub fn method(&self) -> Option<Method> {
         let m = self.diffuse.method();
         (m == self.specular.method()).then_some(m).flatten()

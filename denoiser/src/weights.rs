@@ -158,6 +158,8 @@ fn header(path: &Path, bytes: &[u8]) -> Result<(DenoiserConfig, Method, String, 
         mskp.entry("compositor").or_insert_with(|| serde_json::json!(ScaleCompositor::ConvexBlend));
         mskp.entry("edge_stopping").or_insert(serde_json::json!(crate::mskp::EdgeStopping::Off));
         mskp.entry("guides").or_insert(serde_json::json!([]));
+        // Files written before the guide gain existed (2026-11-26) have none: γ = 0.
+        mskp.entry("guide_gain_exponent").or_insert(serde_json::json!(0.0));
     }
     let config: DenoiserConfig = serde_json::from_value(config_json).map_err(|e| bad(keys::CONFIG, e.to_string()))?;
     check_config(&config).map_err(|e| bad(keys::CONFIG, e))?;
@@ -204,6 +206,7 @@ fn check_config(c: &DenoiserConfig) -> Result<(), String> {
             (m.convs_per_block >= 1 && m.convs_per_block <= 64, "mskp.convs_per_block"),
             ((1..=m.widths.len()).contains(&m.kernel_scales), "mskp.kernel_scales"),
             (odd(m.filter_size), "mskp.filter_size"),
+            ((0.0..=4.0).contains(&m.guide_gain_exponent), "mskp.guide_gain_exponent"),
             (m.margin <= 4096, "mskp.margin"),
             (m.guides.len() <= 64, "mskp.guides"),
         ];

@@ -7,6 +7,7 @@ pub mod sky;
 pub mod dataset;
 pub mod reference;
 pub mod train;
+pub mod calibrate;
 pub mod denoise;
 pub mod eval;
 pub mod eval_plot;

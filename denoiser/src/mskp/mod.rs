@@ -84,6 +84,25 @@ pub struct MsKpConfig {
     /// The guide groups this column's kernels stop at (empty: plain softmax kernels).
     #[config(default = "Vec::new()")]
     pub guides: Vec<GuideGroup>,
+    /// γ of the guides' sample-count gain: at N spp every guide strength the head predicts is
+    /// multiplied by (N/2)^γ ([`guide_gain`]). Files without the field have γ = 0 (no gain).
+    /// Fitted after training on the validation shots (`pixguide calibrate`).
+    #[config(default = 0.0)]
+    pub guide_gain_exponent: f64,
+}
+
+/// The factor (N/2)^γ on every guide strength at `spp` = N samples per pixel (1 at N ≤ 2).
+///
+/// Why: a guide's distance compares two per-pixel sample means, and how far such a distance can
+/// be trusted grows with N (a variance estimated from 2 samples is itself mostly noise; from 32 it
+/// is sound). The head cannot see N: its inputs hold the variance of the mean, σ²/N, in which a
+/// smooth region at 2 spp and a noisy one at 64 spp look alike. Trained on 2–32 spp, the shipped
+/// edge-noise columns predict one compromise strength, too weak once the input has converged:
+/// their output was blurrier than the 32- and 64-spp input on wire-fence (docs/denoiser.md,
+/// "Guide strength grows with the sample count"). The exponent is one scalar per weight file,
+/// fitted on the validation shots, not on the test scenes.
+pub fn guide_gain(exponent: f64, spp: usize) -> f64 {
+    (spp.max(2) as f64 / 2.0).powf(exponent)
 }
 
 /// The coarse-to-fine composite of [`MsKpNet::composite`].
@@ -235,6 +254,7 @@ impl MsKpConfig {
             margin: self.margin,
             low_pass_swap: self.compositor == ScaleCompositor::LowPassSwap,
             guides: self.guides.clone(),
+            guide_gain_exponent: self.guide_gain_exponent,
         }
     }
 }
@@ -252,6 +272,9 @@ pub struct MsKpNet {
     /// Edge-stopping guide groups (from the config).
     #[module(skip)]
     pub guides: Vec<GuideGroup>,
+    /// [`MsKpConfig::guide_gain_exponent`].
+    #[module(skip)]
+    pub guide_gain_exponent: f64,
 }
 
 /// One scale's head outputs: kernel logits `[B, k², h, w]`, the blend logit `[B, 1, h, w]`
@@ -342,8 +365,9 @@ impl MsKpNet {
     }
 
     /// Filters and composites the colour `[B, 3, H, W]` with the head outputs; full size.
-    /// `guides` are the guide groups' features at full size (empty without edge stopping).
-    pub fn composite(colour: Tensor<4>, guides: Vec<GuideLevel>, heads: Vec<HeadOutput>, low_pass_swap: bool) -> Tensor<4> {
+    /// `guides` are the guide groups' features at full size (empty without edge stopping);
+    /// `gain` multiplies every guide strength ([`guide_gain`]).
+    pub fn composite(colour: Tensor<4>, guides: Vec<GuideLevel>, heads: Vec<HeadOutput>, low_pass_swap: bool, gain: f64) -> Tensor<4> {
         let mut pyramid = vec![(colour, guides)];
         for _ in 1..heads.len() {
             let (c, g) = pyramid.last().unwrap();
@@ -356,7 +380,7 @@ impl MsKpNet {
         for ((c, g), head) in pyramid.into_iter().zip(heads).rev() {
             let mut logits = head.logits;
             // Bounded so that exp stays finite; e^±12 spans any useful strength.
-            let strength = head.guide_strength.map(|s| s.clamp(-12.0, 12.0).exp());
+            let strength = head.guide_strength.map(|s| if gain == 1.0 { s.clamp(-12.0, 12.0).exp() } else { s.clamp(-12.0, 12.0).exp().mul_scalar(gain) });
             if let Some(strength) = &strength {
                 let k = crate::kernel::filter_size(logits.dims()[1]);
                 for (i, g) in g.iter().enumerate() {
@@ -391,7 +415,7 @@ impl MsKpNet {
         let [_, _, h, w] = input.dims();
         let heads = self.heads(input.clone());
         let guides = guide_features(&input, &self.guides, spp);
-        let out = Self::composite(input.narrow(1, 0, 3), guides, heads, self.low_pass_swap);
+        let out = Self::composite(input.narrow(1, 0, 3), guides, heads, self.low_pass_swap, guide_gain(self.guide_gain_exponent, spp));
         center_crop(out, h - 2 * self.margin, w - 2 * self.margin)
     }
 }

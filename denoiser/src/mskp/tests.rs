@@ -454,3 +454,31 @@ fn any_size_runs() {
         }
     }
 }
+
+/// The guide gain (N/2)^γ: a step the weak strength e^−3 blurs at 64 spp comes back sharp with
+/// γ = 1 (32× the strength), while at 2 spp the column is exactly the one without a gain.
+#[test]
+fn guide_gain_sharpens_a_converged_step_and_leaves_2spp_alone() {
+    assert_eq!(guide_gain(0.5, 32), 4.0);
+    assert_eq!(guide_gain(1.0, 2), 1.0);
+    assert_eq!(guide_gain(1.0, 1), 1.0);
+    let d = cpu_device();
+    let side = |i: usize| (i % 16) < 7;
+    // A 0.98 step at variance 0.1: about 3.8 noise units per channel after the subtraction.
+    let x: Vec<f64> = (0..4 * 256).map(|i| if i / 256 == 3 { 0.1 } else if side(i) { 0.02 } else { 1.0 }).collect();
+    let run = |gamma: f64, spp: usize| {
+        let cfg = tiny(4).with_guides(vec![GuideGroup::new(0, 3, 1.0, false).with_variance(3)]).with_guide_gain_exponent(gamma);
+        let mut net = cfg.init(1, &d);
+        set_constant_heads(&mut net, &cfg, box_kernels_no_blend(&cfg, Some(-3.0)));
+        let out = to_vec(net.forward(tensor(&x, [1, 4, 16, 16], &d), spp));
+        let (m, o) = (cfg.margin, 16 - 2 * cfg.margin);
+        let worst = (0..3 * o * o).map(|k| (out[k] - x[((k / (o * o)) * 16 + (k / o) % o + m) * 16 + k % o + m]).abs()).fold(0.0, f64::max);
+        (out, worst)
+    };
+    let (plain64, blurred) = run(0.0, 64);
+    let (_, sharp) = run(1.0, 64);
+    assert!(blurred > 0.05, "without a gain the weak strength should blur the step ({blurred})");
+    assert!(sharp < 1e-3, "32× the strength should keep the step ({sharp}; {blurred} without)");
+    assert_eq!(run(1.0, 2).0, run(0.0, 2).0);
+    assert_ne!(plain64, run(1.0, 64).0);
+}

@@ -42,7 +42,8 @@ pub struct LoadOptions {
     pub descriptors: bool,
     pub patch: usize,
     pub sampling: Sampling,
-    /// At most this many training shots (None = all), for quick runs.
+    /// At most this many training shots (None = all), for quick runs; `Some(0)` loads only the
+    /// validation shots (calibration needs no training data).
     pub max_train: Option<usize>,
 }
 
@@ -179,8 +180,11 @@ impl Dataset {
         progress(wanted.len(), wanted.len());
         let all: Vec<&Shot> = train.iter().chain(&val).collect();
         let (width, height) = (all.first().map_or(0, |s| s.target.width), all.first().map_or(0, |s| s.target.height));
-        if train.is_empty() {
+        if train.is_empty() && opts.max_train != Some(0) {
             return Err(err(root, "no training shots"));
+        }
+        if all.is_empty() {
+            return Err(err(root, "no validation shots"));
         }
         if let Some(s) = all.iter().find(|s| s.target.width != width || s.target.height != height) {
             return Err(err(&root.join(&s.name), format!("size differs from the first shot's {width}×{height}")));

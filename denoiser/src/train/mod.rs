@@ -7,12 +7,14 @@
 //! - [`schedule`]: stages (branches → finetune; joint) and the ablations.
 //! - [`augment`]: the 8 flips/rotations of a patch, every buffer moved consistently.
 //! - [`checkpoint`]: weight files, optimizer state, run state; atomic writes.
+//! - [`calibrate`]: after training, the guides' sample-count gain fitted on the validation shots.
 //!
 //! Determinism: every random draw of step k of stage j (spp, shots, corners, the permutations
 //! of the disentangling loss) comes from `SplitMix64::derive(seed ^ j-tag, k)`, so a run is a
 //! function of (seed, options) and resuming at step k needs no RNG state beyond k.
 
 pub mod augment;
+pub mod calibrate;
 pub mod checkpoint;
 pub mod data;
 pub mod patches;
@@ -304,6 +306,19 @@ pub fn optimizer() -> ModuleOptimizer {
 /// grid of every val shot at every spp, mean over patches. The paper validates on linear
 /// relMSE_val (method.md §7.3); on our short runs that chose checkpoints full of fireflies. `None` without validation shots.
 pub fn validate(model: &MethodModel, data: &Dataset, opts: &TrainOptions) -> Option<f64> {
+    validate_by_spp(model, data, opts).map(|v| v.overall)
+}
+
+/// [`validate`]'s score, and the same mean at each of the dataset's sample counts.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Validation {
+    pub overall: f64,
+    /// Mean over the patches at `data.spps[i]`.
+    pub by_spp: Vec<f64>,
+}
+
+/// [`validate`] with the mean at each sample count as well.
+pub fn validate_by_spp(model: &MethodModel, data: &Dataset, opts: &TrainOptions) -> Option<Validation> {
     if data.val.is_empty() {
         return None;
     }
@@ -321,6 +336,7 @@ pub fn validate(model: &MethodModel, data: &Dataset, opts: &TrainOptions) -> Opt
         }
     }
     let (mut sum, mut n) = (0.0f64, 0usize);
+    let mut per_spp = vec![(0.0f64, 0usize); data.spps.len()];
     // Chunks never mix sample counts (tensor shapes must agree): refs are grouped by spp.
     let mut i = 0;
     while i < refs.len() {
@@ -334,9 +350,12 @@ pub fn validate(model: &MethodModel, data: &Dataset, opts: &TrainOptions) -> Opt
         let v: f32 = rel_mse_test(out.radiance, target.total).into_scalar();
         sum += v as f64 * chunk.len() as f64;
         n += chunk.len();
+        let s = &mut per_spp[refs[i].spp];
+        s.0 += v as f64 * chunk.len() as f64;
+        s.1 += chunk.len();
         i = j;
     }
-    Some(sum / n as f64)
+    Some(Validation { overall: sum / n as f64, by_spp: per_spp.into_iter().map(|(s, k)| s / k.max(1) as f64).collect() })
 }
 
 /// Runs the schedule from `model` (or from the checkpoint in `ckpt_dir` when `resume` and one

@@ -1,6 +1,7 @@
 use super::*;
 use crate::ensemble::EnsembleConfig;
 use crate::kpcn::KpcnConfig;
+use crate::mskp::{EdgeStopping, MsKpConfig};
 use crate::pathnet::PathNetConfig;
 use crate::preprocess::{prepare, prepare_target, PreparedImage};
 use checkpoint::flat_values;
@@ -323,4 +324,34 @@ fn time_budget_validates_the_last_step() {
     assert!(steps > 0 && steps < 1000, "{steps} steps");
     assert_eq!(validated, vec![steps], "validated at {validated:?}, stage ended at {steps}");
     assert!(out.best_val.is_some(), "a stage without steps dropped the previous stage's best");
+}
+
+/// `pixguide calibrate`'s search: one validation per exponent, the same score at 2 spp whatever
+/// the exponent (the gain is 1 there), different scores at 4 spp (it is not), the lowest kept and
+/// left set on the model; and the per-spp validation agrees with [`validate`].
+#[test]
+fn calibration_scores_each_exponent_and_keeps_the_lowest() {
+    let data = dataset();
+    let unet = MsKpConfig::new(34).with_widths(vec![4, 6]).with_kernel_scales(2).with_filter_size(3).with_margin(1).with_edge_stopping(EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack);
+    let mut o = options(Method::G, None, &short());
+    o.config = tiny().with_mskp(Some(unet));
+    let mut model = MethodModel::init(&o.config, Method::G, &o.backend.training_device().unwrap());
+    let plain = validate(&model, &data, &o).unwrap();
+    let by = validate_by_spp(&model, &data, &o).unwrap();
+    assert_eq!(by.overall, plain);
+    assert!((by.by_spp.iter().sum::<f64>() / by.by_spp.len() as f64 - plain).abs() < 1e-9 * plain, "{by:?} against {plain}");
+    let exps = [0.0, 2.0, 4.0];
+    let mut heard = Vec::new();
+    let cal = calibrate::calibrate_guide_gain(&mut model, &data, &o, &exps, &mut |g, _| heard.push(g)).unwrap();
+    assert_eq!(heard, exps);
+    assert_eq!(cal.tried[0].1, by, "γ = 0 is the model as it was");
+    let at2: Vec<f64> = cal.tried.iter().map(|t| t.1.by_spp[0]).collect();
+    assert!(at2.iter().all(|v| *v == at2[0]), "2 spp must not depend on γ: {at2:?}");
+    let at4: Vec<f64> = cal.tried.iter().map(|t| t.1.by_spp[1]).collect();
+    assert!(at4[0] != at4[2], "4 spp must depend on γ: {at4:?}");
+    let lowest = cal.tried.iter().map(|t| t.1.overall).fold(f64::INFINITY, f64::min);
+    let kept = cal.tried.iter().find(|t| t.0 == cal.best).unwrap();
+    assert_eq!(kept.1.overall, lowest);
+    let set = model.diffuse.d_g.as_ref().and_then(|c| c.unet.as_ref()).map(|u| u.guide_gain_exponent);
+    assert_eq!(set, Some(cal.best));
 }
