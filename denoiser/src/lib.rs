@@ -26,8 +26,11 @@
 //! - [`weights`]: weight files (safetensors, module-path names, config + provenance metadata).
 //! - [`train`]: data, patch sampling, the staged schedule, checkpoints (docs/training.md).
 //! - [`oidn`]: Intel Open Image Denoise, loaded at run time, as a baseline denoiser.
+//! - [`names`]: the command-line names of methods, presets and ablations, parsed and printed.
 //! - [`layers`]: convolution with deterministic init, input sanitising, cropping.
 //! - [`rng`]: the seeded random stream of weight init and loss permutations.
+
+pub mod names;
 
 pub mod column;
 pub mod ensemble;

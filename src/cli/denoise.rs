@@ -22,7 +22,7 @@ pub struct DenoiseArgs {
     /// Denoiser: guided (the paper's method), g (KPCN on G-buffers), p (KPCN on P-buffers),
     /// both (KPCN on G- and P-buffers), or oidn (Intel Open Image Denoise, the baseline; installed
     /// into target/oidn-venv from PyPI the first time).
-    #[arg(long, default_value = "guided", value_parser = parse_model)]
+    #[arg(long, default_value = "guided")]
     pub model: Model,
     /// Weight file (default: denoiser/weights/<model>-default.safetensors).
     #[arg(long)]
@@ -70,11 +70,26 @@ pub enum Model {
     Oidn,
 }
 
-pub fn parse_model(s: &str) -> std::result::Result<Model, String> {
-    if s == "oidn" {
-        return Ok(Model::Oidn);
+impl Model {
+    /// Every model, in the order help texts list them: the methods' own order, then OIDN.
+    pub const ALL: [Model; 5] = [Model::Net(Method::G), Model::Net(Method::P), Model::Net(Method::Both), Model::Net(Method::Guided), Model::Oidn];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Model::Net(m) => m.name(),
+            Model::Oidn => "oidn",
+        }
     }
-    Method::parse(s).map(Model::Net).ok_or_else(|| format!("unknown model `{s}` (expected guided, g, p, both or oidn)"))
+}
+
+/// The methods' names come from `Method` (denoiser/src/names.rs); only `oidn` is added here.
+impl clap::ValueEnum for Model {
+    fn value_variants<'a>() -> &'a [Self] {
+        &Model::ALL
+    }
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.name()))
+    }
 }
 
 /// Loads the weights for `method` (from `file`, or the default file), and checks that they are

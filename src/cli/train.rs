@@ -6,7 +6,7 @@ use crate::alloc_stats;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use denoiser::method::Method;
-use denoiser::model::DenoiserConfig;
+use denoiser::model::{DenoiserConfig, Preset};
 use denoiser::train::data::{Dataset, LoadOptions};
 use denoiser::train::patches::Sampling;
 use denoiser::train::schedule::{self, Ablation, FinetuneLoss, LrShape, ScheduleOptions};
@@ -22,13 +22,13 @@ pub struct TrainArgs {
     /// Dataset folder written by `pixguide dataset` (shots.jsonl, train/, val/).
     #[arg(long)]
     pub data: PathBuf,
-    /// g, p, both or guided.
+    /// The method to train.
     #[arg(long, default_value = "g")]
-    pub method: String,
+    pub method: Method,
     /// Guided ablation: full-n-full (from scratch), fix-n-train (only E trains),
     /// radiance-only (E sees only I_G, I_P).
     #[arg(long)]
-    pub ablation: Option<String>,
+    pub ablation: Option<Ablation>,
     /// Trained G model (weights file) the guided model starts from; with --method g, the model
     /// this run continues from (warm start: new stages, fresh optimiser).
     #[arg(long)]
@@ -43,7 +43,7 @@ pub struct TrainArgs {
     /// units of its noise), kpcn (the CPU-sized KPCN), paper-half (50 % of the paper's) or
     /// paper.
     #[arg(long, default_value = "default")]
-    pub preset: String,
+    pub preset: Preset,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Output weights (safetensors). A log `<output>.log.jsonl` is written next to it.
@@ -188,14 +188,14 @@ fn schedule_options(a: &TrainArgs, config: &DenoiserConfig) -> ScheduleOptions {
 /// machine without other load (docs/training.md), which sets its share of a --minutes budget.
 struct PlanItem {
     name: &'static str,
-    method: &'static str,
-    ablation: Option<&'static str>,
-    preset: &'static str,
+    method: Method,
+    ablation: Option<Ablation>,
+    preset: Preset,
     steps: [usize; 3],
     secs_per_step: f64,
 }
 
-const fn item(name: &'static str, method: &'static str, ablation: Option<&'static str>, preset: &'static str, steps: [usize; 3], secs_per_step: f64) -> PlanItem {
+const fn item(name: &'static str, method: Method, ablation: Option<Ablation>, preset: Preset, steps: [usize; 3], secs_per_step: f64) -> PlanItem {
     PlanItem { name, method, ablation, preset, steps, secs_per_step }
 }
 
@@ -205,17 +205,17 @@ const fn item(name: &'static str, method: &'static str, ablation: Option<&'stati
 /// tone-mapped finetune. both keeps its earlier count: no both run of the current U-Net has
 /// trained stably yet (docs/training.md). ≈ 3 h for the whole plan.
 const PLAN: [PlanItem; 10] = [
-    item("g", "g", None, "default", [2900, 400, 0], 0.63),
-    item("p", "p", None, "default", [600, 0, 0], 3.4),
-    item("both", "both", None, "default", [250, 0, 0], 3.5),
-    item("guided", "guided", None, "default", [0, 0, 200], 4.5),
-    item("fix-n-train", "guided", Some("fix-n-train"), "default", [0, 0, 200], 1.5),
-    item("radiance-only", "guided", Some("radiance-only"), "default", [0, 0, 200], 4.5),
-    item("full-n-full", "guided", Some("full-n-full"), "default", [0, 0, 400], 5.0),
+    item("g", Method::G, None, Preset::Default, [2900, 400, 0], 0.63),
+    item("p", Method::P, None, Preset::Default, [600, 0, 0], 3.4),
+    item("both", Method::Both, None, Preset::Default, [250, 0, 0], 3.5),
+    item("guided", Method::Guided, None, Preset::Default, [0, 0, 200], 4.5),
+    item("fix-n-train", Method::Guided, Some(Ablation::FixNTrain), Preset::Default, [0, 0, 200], 1.5),
+    item("radiance-only", Method::Guided, Some(Ablation::RadianceOnly), Preset::Default, [0, 0, 200], 4.5),
+    item("full-n-full", Method::Guided, Some(Ablation::FullNFull), Preset::Default, [0, 0, 400], 5.0),
     // The half models get their default twins' step counts, so the sizes differ only in width.
-    item("g", "g", None, "half", [2900, 400, 0], 0.45),
-    item("p", "p", None, "half", [600, 0, 0], 2.5),
-    item("guided", "guided", None, "half", [0, 0, 200], 3.5),
+    item("g", Method::G, None, Preset::Half, [2900, 400, 0], 0.45),
+    item("p", Method::P, None, Preset::Half, [600, 0, 0], 2.5),
+    item("guided", Method::Guided, None, Preset::Half, [0, 0, 200], 3.5),
 ];
 
 fn run_all(a: TrainArgs) -> Result<()> {
@@ -223,7 +223,7 @@ fn run_all(a: TrainArgs) -> Result<()> {
     let steps = |it: &PlanItem| -> usize { it.steps.iter().map(|&n| scaled(n)).sum() };
     let weight: Vec<f64> = PLAN.iter().map(|it| it.secs_per_step * steps(it) as f64).collect();
     println!("plan: {} runs, {:.0} steps, estimated {:.0} min without other load", PLAN.len(), PLAN.iter().map(|it| steps(it) as f64).sum::<f64>(), weight.iter().sum::<f64>() / 60.0);
-    let path = |name: &str, preset: &str| a.out_dir.join(format!("{name}-{preset}.safetensors"));
+    let path = |name: &str, preset: Preset| a.out_dir.join(format!("{name}-{preset}.safetensors"));
     let start = Instant::now();
     let mut cache = DataCache::new();
     for (k, it) in PLAN.iter().enumerate() {
@@ -235,9 +235,9 @@ fn run_all(a: TrainArgs) -> Result<()> {
         let mut r = a.clone();
         r.all = false;
         r.output = Some(out);
-        r.method = it.method.to_string();
-        r.ablation = it.ablation.map(str::to_string);
-        r.preset = it.preset.to_string();
+        r.method = it.method;
+        r.ablation = it.ablation;
+        r.preset = it.preset;
         r.checkpoint_dir = None;
         let [b, f, j] = it.steps.map(scaled);
         r.branch_steps = Some(b);
@@ -245,7 +245,7 @@ fn run_all(a: TrainArgs) -> Result<()> {
         r.joint_steps = Some(j);
         r.scratch_steps = Some(j);
         r.resume = true;
-        if Method::parse(it.method) == Some(Method::Guided) && it.ablation != Some("full-n-full") {
+        if it.method == Method::Guided && it.ablation != Some(Ablation::FullNFull) {
             r.from_g = Some(path("g", it.preset));
             r.from_p = Some(path("p", it.preset));
         }
@@ -308,18 +308,15 @@ type DataCache = Vec<(bool, Dataset)>;
 
 fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
     let output = a.output.clone().context("--output is required")?;
-    let mut method = Method::parse(&a.method).with_context(|| format!("--method {}: expected g, p, both or guided", a.method))?;
-    let ablation = match &a.ablation {
-        None => None,
-        Some(s) => Some(Ablation::parse(s).with_context(|| format!("--ablation {s}: expected full-n-full, fix-n-train or radiance-only"))?),
-    };
+    let (mut method, ablation) = (a.method, a.ablation);
     if ablation.is_some() {
-        if method != Method::Guided && a.method != "g" {
+        // g is the default: `--ablation X` alone means the guided method.
+        if method != Method::Guided && method != Method::G {
             bail!("--ablation applies to the guided method");
         }
         method = Method::Guided;
     }
-    let config = DenoiserConfig::preset(&a.preset).with_context(|| format!("--preset {}: expected one of {}", a.preset, DenoiserConfig::PRESETS.join(", ")))?;
+    let config = a.preset.config();
     if !(0.0..1.0).contains(&a.warmup) {
         bail!("--warmup {}: expected a fraction in [0, 1)", a.warmup);
     }
@@ -333,7 +330,7 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
     let mut metadata = BTreeMap::new();
     metadata.insert("method".to_string(), method.name().to_string());
     metadata.insert("variant".to_string(), name.clone());
-    metadata.insert("preset".to_string(), a.preset.clone());
+    metadata.insert("preset".to_string(), a.preset.to_string());
     metadata.insert("config".to_string(), serde_json::to_string(&config)?);
     metadata.insert("seed".to_string(), a.seed.to_string());
     metadata.insert("dataset".to_string(), a.data.display().to_string());
@@ -478,7 +475,7 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
             opts.backend.name()
         ),
     };
-    weights::save(&output, &outcome.model, &tr::effective_config(&opts), &a.preset, &provenance)?;
+    weights::save(&output, &outcome.model, &tr::effective_config(&opts), a.preset.name(), &provenance)?;
     let per_stage: Vec<String> = opts
         .stages
         .iter()
