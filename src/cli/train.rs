@@ -402,7 +402,15 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
         let line = match &e {
             Event::StageStart { index, stage, from_step, steps_per_epoch } => {
                 pb.set_position((stage_offsets[*index] + from_step) as u64);
-                format!("{{\"event\":\"stage\",\"stage\":{index},\"kind\":\"{}\",\"steps\":{},\"from_step\":{from_step},\"steps_per_epoch\":{steps_per_epoch},\"lr_rest\":{},\"lr_e\":{}}}", stage.kind.name(), stage.steps, json_opt(stage.lr_rest), json_opt(stage.lr_e))
+                LogLine::Stage {
+                    stage: *index,
+                    kind: stage.kind.name(),
+                    steps: stage.steps,
+                    from_step: *from_step,
+                    steps_per_epoch: *steps_per_epoch,
+                    lr_rest: stage.lr_rest,
+                    lr_e: stage.lr_e,
+                }
             }
             Event::Step { stage, step, steps: _, loss, seconds, patches } => {
                 ema = Some(ema.map_or(*loss, |m| 0.95 * m + 0.05 * loss));
@@ -418,23 +426,21 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
                     rate.unwrap(),
                     last_val.map(|v| format!(" val {v:.4}")).unwrap_or_default()
                 ));
-                format!("{{\"event\":\"step\",\"stage\":{stage},\"step\":{step},\"loss\":{},\"seconds\":{seconds:.4}}}", json_f(*loss))
+                LogLine::Step { stage: *stage, step: *step, loss: *loss, seconds: rounded(*seconds, 4) }
             }
             Event::Validation { stage, step, total_step, rel_mse, best, seconds } => {
                 last_val = Some(*rel_mse);
-                format!(
-                    "{{\"event\":\"val\",\"stage\":{stage},\"step\":{step},\"total_step\":{total_step},\"rel_mse\":{},\"best\":{best},\"seconds\":{seconds:.2}}}",
-                    json_f(*rel_mse)
-                )
+                LogLine::Val { stage: *stage, step: *step, total_step: *total_step, rel_mse: *rel_mse, best: *best, seconds: rounded(*seconds, 2) }
             }
-            Event::Checkpoint { path } => format!("{{\"event\":\"checkpoint\",\"dir\":{:?}}}", path.display().to_string()),
+            Event::Checkpoint { path } => LogLine::Checkpoint { dir: path.display().to_string() },
             Event::StageEnd { index, steps, reason } => {
                 if *reason != "steps done" {
                     pb.println(format!("stage {index} ({}) ended at step {steps}: {reason}", opts.stages[*index].kind.name()));
                 }
-                format!("{{\"event\":\"stage_end\",\"stage\":{index},\"steps\":{steps},\"reason\":\"{reason}\"}}")
+                LogLine::StageEnd { stage: *index, steps: *steps, reason }
             }
         };
+        let line = serde_json::to_string(&line).unwrap_or_default();
         if let Err(err) = writeln!(log, "{line}") {
             log_err.get_or_insert(err);
         }
@@ -525,14 +531,39 @@ pub fn iso_date_utc() -> String {
     format!("{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z", rem / 3600, rem / 60 % 60, rem % 60)
 }
 
-fn json_f(v: f64) -> String {
-    if v.is_finite() {
-        format!("{v}")
-    } else {
-        "null".into()
-    }
+/// One line of `<output>.log.jsonl` (read back by `pixguide plot-training`). Non-finite losses
+/// come out as `null`, which serde_json writes for them.
+#[derive(serde::Serialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
+enum LogLine<'a> {
+    Stage { stage: usize, kind: &'a str, steps: usize, from_step: usize, steps_per_epoch: usize, lr_rest: Option<f64>, lr_e: Option<f64> },
+    Step { stage: usize, step: usize, loss: f64, seconds: f64 },
+    Val { stage: usize, step: usize, total_step: usize, rel_mse: f64, best: bool, seconds: f64 },
+    Checkpoint { dir: String },
+    StageEnd { stage: usize, steps: usize, reason: &'a str },
 }
 
-fn json_opt(v: Option<f64>) -> String {
-    v.map(json_f).unwrap_or_else(|| "null".into())
+/// `v` to `digits` decimals: timings are logged no finer than they are measured.
+fn rounded(v: f64, digits: i32) -> f64 {
+    let k = 10f64.powi(digits);
+    (v * k).round() / k
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{rounded, LogLine};
+
+    /// The log lines read exactly as the hand-written JSON they replaced.
+    #[test]
+    fn log_lines_keep_their_text() {
+        let line = |l: LogLine| serde_json::to_string(&l).unwrap();
+        let stage = LogLine::Stage { stage: 0, kind: "branches", steps: 50, from_step: 0, steps_per_epoch: 5, lr_rest: Some(0.001), lr_e: None };
+        assert_eq!(line(stage), r#"{"event":"stage","stage":0,"kind":"branches","steps":50,"from_step":0,"steps_per_epoch":5,"lr_rest":0.001,"lr_e":null}"#);
+        let step = LogLine::Step { stage: 1, step: 7, loss: f64::NAN, seconds: rounded(0.123_456, 4) };
+        assert_eq!(line(step), r#"{"event":"step","stage":1,"step":7,"loss":null,"seconds":0.1235}"#);
+        let val = LogLine::Val { stage: 1, step: 7, total_step: 9, rel_mse: 0.0125, best: true, seconds: rounded(12.345_6, 2) };
+        assert_eq!(line(val), r#"{"event":"val","stage":1,"step":7,"total_step":9,"rel_mse":0.0125,"best":true,"seconds":12.35}"#);
+        assert_eq!(line(LogLine::Checkpoint { dir: "a \"b\"".into() }), r#"{"event":"checkpoint","dir":"a \"b\""}"#);
+        assert_eq!(line(LogLine::StageEnd { stage: 0, steps: 10, reason: "steps done" }), r#"{"event":"stage_end","stage":0,"steps":10,"reason":"steps done"}"#);
+    }
 }
