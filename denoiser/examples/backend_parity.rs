@@ -19,7 +19,7 @@ use denoiser::burn::optim::{AdamConfig, GradientsParams};
 use denoiser::burn::tensor::{Device, Tensor, TensorData};
 use denoiser::infer::{self, InferOptions};
 use denoiser::method::{Method, MethodModel};
-use denoiser::model::{BranchInput, DenoiserConfig};
+use denoiser::model::{BranchInput, DenoiserConfig, Preset};
 use denoiser::preprocess::{InputTensors, TargetTensors};
 use denoiser::train::schedule::{LrShape, Stage, StageKind};
 use denoiser::train::stage_loss;
@@ -78,10 +78,10 @@ fn max_diff(a: &[f32], b: &[f32]) -> (f32, f32) {
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let preset = args.first().map(String::as_str).unwrap_or("default");
-    let method = args.get(1).map(|s| Method::parse(s).unwrap_or_else(|| panic!("unknown method {s}"))).unwrap_or(Method::Guided);
+    let method = args.get(1).map(|s| s.parse::<Method>().unwrap_or_else(|e| panic!("{e}"))).unwrap_or(Method::Guided);
     let num = |i: usize, d: usize| args.get(i).and_then(|s| s.parse().ok()).unwrap_or(d);
     let (steps, size, spp) = (num(2, 3), num(3, 96), num(4, 4));
-    let cfg = DenoiserConfig::preset(preset).unwrap_or_else(|| panic!("unknown preset {preset}"));
+    let cfg = preset.parse::<Preset>().unwrap_or_else(|e| panic!("{e}")).config();
     let backends = [Backend::Tch, Backend::Flex];
     for bk in backends {
         bk.device().unwrap_or_else(|e| panic!("{e}"));

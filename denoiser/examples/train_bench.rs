@@ -7,7 +7,7 @@
 use std::time::Instant;
 
 use denoiser::method::{Method, MethodModel};
-use denoiser::model::DenoiserConfig;
+use denoiser::model::Preset;
 use denoiser::train::data::{batch_tensors, Dataset, LoadOptions};
 use denoiser::train::patches::Sampling;
 use denoiser::train::schedule::{LrShape, Stage, StageKind};
@@ -22,24 +22,24 @@ fn main() {
     let data = Dataset::load(std::path::Path::new(data_dir), &load, &mut |_, _| {}).unwrap();
     let dev = denoiser::cpu_training_device();
     let stage = |kind, rest: Option<f64>, e: Option<f64>, w| Stage { kind, steps: 1, lr_rest: rest, lr_e: e, w_path: w, shape: LrShape::Constant };
-    let variants: Vec<(&str, &str, Method, Stage, bool)> = vec![
-        ("g branches", "default", Method::G, stage(StageKind::Branches, Some(1e-4), None, 0.0), false),
-        ("g finetune", "default", Method::G, stage(StageKind::Finetune, Some(1e-6), None, 0.0), false),
-        ("p branches", "default", Method::P, stage(StageKind::Branches, Some(1e-4), None, 0.1), false),
-        ("p finetune", "default", Method::P, stage(StageKind::Finetune, Some(1e-6), None, 0.0), false),
-        ("both branches", "default", Method::Both, stage(StageKind::Branches, Some(1e-4), None, 0.1), false),
-        ("both finetune", "default", Method::Both, stage(StageKind::Finetune, Some(1e-6), None, 0.0), false),
-        ("guided joint", "default", Method::Guided, stage(StageKind::Joint, Some(1e-6), Some(1e-5), 0.1), false),
-        ("fix-n-train joint", "default", Method::Guided, stage(StageKind::Joint, None, Some(1e-5), 0.0), false),
-        ("radiance-only joint", "default", Method::Guided, stage(StageKind::Joint, Some(1e-6), Some(1e-5), 0.1), true),
-        ("g-half branches", "half", Method::G, stage(StageKind::Branches, Some(1e-4), None, 0.0), false),
-        ("p-half branches", "half", Method::P, stage(StageKind::Branches, Some(1e-4), None, 0.1), false),
-        ("guided-half joint", "half", Method::Guided, stage(StageKind::Joint, Some(1e-6), Some(1e-5), 0.1), false),
+    let variants: Vec<(&str, Preset, Method, Stage, bool)> = vec![
+        ("g branches", Preset::Default, Method::G, stage(StageKind::Branches, Some(1e-4), None, 0.0), false),
+        ("g finetune", Preset::Default, Method::G, stage(StageKind::Finetune, Some(1e-6), None, 0.0), false),
+        ("p branches", Preset::Default, Method::P, stage(StageKind::Branches, Some(1e-4), None, 0.1), false),
+        ("p finetune", Preset::Default, Method::P, stage(StageKind::Finetune, Some(1e-6), None, 0.0), false),
+        ("both branches", Preset::Default, Method::Both, stage(StageKind::Branches, Some(1e-4), None, 0.1), false),
+        ("both finetune", Preset::Default, Method::Both, stage(StageKind::Finetune, Some(1e-6), None, 0.0), false),
+        ("guided joint", Preset::Default, Method::Guided, stage(StageKind::Joint, Some(1e-6), Some(1e-5), 0.1), false),
+        ("fix-n-train joint", Preset::Default, Method::Guided, stage(StageKind::Joint, None, Some(1e-5), 0.0), false),
+        ("radiance-only joint", Preset::Default, Method::Guided, stage(StageKind::Joint, Some(1e-6), Some(1e-5), 0.1), true),
+        ("g-half branches", Preset::Half, Method::G, stage(StageKind::Branches, Some(1e-4), None, 0.0), false),
+        ("p-half branches", Preset::Half, Method::P, stage(StageKind::Branches, Some(1e-4), None, 0.1), false),
+        ("guided-half joint", Preset::Half, Method::Guided, stage(StageKind::Joint, Some(1e-6), Some(1e-5), 0.1), false),
     ];
     let mut state: Vec<_> = variants
         .iter()
         .map(|(_, preset, m, st, rad)| {
-            let mut cfg = DenoiserConfig::preset(preset).unwrap();
+            let mut cfg = preset.config();
             cfg.ensemble.radiance_only = *rad;
             let mut model = MethodModel::init(&cfg, *m, &dev);
             if st.lr_rest.is_none() {

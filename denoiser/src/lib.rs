@@ -20,13 +20,17 @@
 //! - [`preprocess`]: network inputs from a rendered frame, targets from a reference (§2, §4.1).
 //! - [`method`]: the compared methods (G, P, both, guided) as one model type.
 //! - [`loss`]: L1, the path-disentangling loss, validation relMSE.
-//! - [`infer`]: tiled whole-image inference with bounded memory.
+//! - [`infer`]: tiled whole-image inference with bounded memory; [`infer::denoise_frame`], a
+//!   rendered frame to a denoised one in one call.
 //! - [`metrics`]: relMSE, 1 − SSIM, relMSE_val (method.md §7.3).
 //! - [`weights`]: weight files (safetensors, module-path names, config + provenance metadata).
 //! - [`train`]: data, patch sampling, the staged schedule, checkpoints (docs/training.md).
 //! - [`oidn`]: Intel Open Image Denoise, loaded at run time, as a baseline denoiser.
+//! - [`names`]: the command-line names of methods, presets and ablations, parsed and printed.
 //! - [`layers`]: convolution with deterministic init, input sanitising, cropping.
 //! - [`rng`]: the seeded random stream of weight init and loss permutations.
+
+pub mod names;
 
 pub mod column;
 pub mod ensemble;

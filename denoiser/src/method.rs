@@ -45,7 +45,7 @@ impl Method {
     }
 
     pub fn parse(s: &str) -> Option<Method> {
-        Method::ALL.into_iter().find(|m| m.name() == s)
+        s.parse().ok()
     }
 
     /// Whether the renderer must record per-sample path descriptors for this model.
@@ -54,11 +54,7 @@ impl Method {
     }
 }
 
-impl std::fmt::Display for Method {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
+crate::names::named!(Method, "method");
 
 /// The networks of one branch (diffuse or specular); unused ones are `None`.
 #[derive(Module, Debug)]

@@ -122,27 +122,6 @@ impl DenoiserConfig {
         c
     }
 
-    /// Preset names, for help texts and errors.
-    pub const PRESETS: [&'static str; 8] = ["default", "half", "swap", "edge", "edge-noise", "kpcn", "paper-half", "paper"];
-
-    /// `default` (multi-scale U-Net columns), `half` (of default), `swap` (default with the
-    /// patented low-band-swap compositor at five scales, opt-in), `edge` (five scales,
-    /// edge-stopping kernels), `edge-noise` (its colour guide noise-normalised), `kpcn` (the CPU-sized KPCN),
-    /// `paper-half` or `paper`.
-    pub fn preset(name: &str) -> Option<Self> {
-        match name {
-            "default" => Some(Self::cpu_default()),
-            "half" => Some(Self::half()),
-            "swap" => Some(Self::swap()),
-            "edge" => Some(Self::edge()),
-            "edge-noise" => Some(Self::edge_noise()),
-            "kpcn" => Some(Self::kpcn_cpu()),
-            "paper-half" => Some(Self::paper_half()),
-            "paper" => Some(Self::paper()),
-            _ => None,
-        }
-    }
-
     /// Peak learning rate of the pretraining stage: the highest rate measured stable for the
     /// backbone (docs/training.md, "Learning rate"). The U-Net trains at 1e-3 (3e-3 diverged);
     /// the KPCN stays at the paper's 1e-4 (1e-3 diverged, 3e-4 oscillated in the race).
@@ -265,6 +244,57 @@ impl DenoiserConfig {
     }
 }
 
+/// A named set of network sizes, as `pixguide train --preset` takes it and weight files record
+/// it: `default` (multi-scale U-Net columns), `half` (of default), `swap` (default with the
+/// patented low-band-swap compositor at five scales, opt-in), `edge` (five scales,
+/// edge-stopping kernels), `edge-noise` (its colour guide noise-normalised), `kpcn` (the
+/// CPU-sized KPCN), `paper-half` or `paper`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Preset {
+    Default,
+    Half,
+    Swap,
+    Edge,
+    EdgeNoise,
+    Kpcn,
+    PaperHalf,
+    Paper,
+}
+
+impl Preset {
+    pub const ALL: [Preset; 8] =
+        [Preset::Default, Preset::Half, Preset::Swap, Preset::Edge, Preset::EdgeNoise, Preset::Kpcn, Preset::PaperHalf, Preset::Paper];
+
+    /// The name in weight files (`pixguide.preset`) and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::Default => "default",
+            Preset::Half => "half",
+            Preset::Swap => "swap",
+            Preset::Edge => "edge",
+            Preset::EdgeNoise => "edge-noise",
+            Preset::Kpcn => "kpcn",
+            Preset::PaperHalf => "paper-half",
+            Preset::Paper => "paper",
+        }
+    }
+
+    pub fn config(self) -> DenoiserConfig {
+        match self {
+            Preset::Default => DenoiserConfig::cpu_default(),
+            Preset::Half => DenoiserConfig::half(),
+            Preset::Swap => DenoiserConfig::swap(),
+            Preset::Edge => DenoiserConfig::edge(),
+            Preset::EdgeNoise => DenoiserConfig::edge_noise(),
+            Preset::Kpcn => DenoiserConfig::kpcn_cpu(),
+            Preset::PaperHalf => DenoiserConfig::paper_half(),
+            Preset::Paper => DenoiserConfig::paper(),
+        }
+    }
+}
+
+crate::names::named!(Preset, "preset");
+
 /// Inputs of one branch, all at the input patch size H × W.
 #[derive(Clone, Debug)]
 pub struct BranchInput {
@@ -351,9 +381,9 @@ mod tests {
 
     #[test]
     fn presets_shapes_and_costs() {
-        for name in DenoiserConfig::PRESETS {
-            let c = DenoiserConfig::preset(name).unwrap();
-            assert!(c.macs_per_pixel(8) > 0);
+        for p in Preset::ALL {
+            assert_eq!(p.name().parse::<Preset>().unwrap(), p);
+            assert!(p.config().macs_per_pixel(8) > 0);
         }
         let paper = DenoiserConfig::paper();
         let paper_half = DenoiserConfig::paper_half();
@@ -372,7 +402,7 @@ mod tests {
         assert_eq!(default_half.mskp.as_ref().map(|m| m.widths.clone()), Some(vec![12, 16, 24, 32, 40]));
         let (b, s) = (default.macs_per_pixel(8) as f64, default_half.macs_per_pixel(8) as f64);
         assert!(s < b / 2.0 && s > b / 4.5, "{s} vs {b}");
-        assert!(DenoiserConfig::preset("huge").is_none());
+        assert!("huge".parse::<Preset>().is_err());
         // The multi-scale preset's targets (issue #16): ≤ 0.5 M MAC per pixel for the whole
         // guided model at 8 spp, and a column seeing ≥ 64 px.
         let ms = DenoiserConfig::cpu_default();

@@ -1,14 +1,14 @@
 //! Network inputs from a rendered frame (method.md §2 and §4.1), and training targets from a
 //! reference frame. The same code serves the in-process render-and-denoise path and the dataset
-//! files (which `renderer::film::exr_io::read_frame` turns back into the same [`Frame`]).
+//! files (which `film::exr_io::read_frame` turns back into the same [`Frame`]).
 //!
 //! Everything is kept on the CPU as planar `[C, H, W]` arrays so that training can cut patches
 //! and inference can cut tiles before anything becomes a tensor: a 1024² frame at 8 spp has
 //! 1.2 GB of descriptors, which must never be one tensor.
 
 use burn::tensor::{Device, Tensor, TensorData};
-use renderer::film::descriptors::{field, Descriptors, FIELDS};
-use renderer::film::{Frame, PixelBuffer};
+use film::descriptors::{field, Descriptors, FIELDS};
+use film::{Frame, PixelBuffer};
 
 use crate::kpcn::channels::{COLOUR_BLOCK, G_BLOCK};
 use crate::model::BranchInput;

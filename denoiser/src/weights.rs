@@ -56,6 +56,23 @@ pub struct Provenance {
     pub notes: String,
 }
 
+/// Where the shipped weights of `method` live: `denoiser/weights/<method>-default.safetensors`
+/// under the current directory if that exists (a checkout run from its root), else in the
+/// source tree this crate was built from.
+pub fn default_path(method: Method) -> PathBuf {
+    let name = format!("{}-default.safetensors", method.name());
+    let rel = Path::new("denoiser/weights").join(&name);
+    if rel.exists() {
+        return rel;
+    }
+    let built = Path::new(env!("CARGO_MANIFEST_DIR")).join("weights").join(&name);
+    if built.exists() {
+        built
+    } else {
+        rel
+    }
+}
+
 /// A loaded weight file.
 #[derive(Debug)]
 pub struct Loaded {

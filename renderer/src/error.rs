@@ -21,6 +21,17 @@ pub enum Error {
 
 pub type Result<T> = std::result::Result<T, Error>;
 
+/// Frame files fail with the variant of the same name, so `?` keeps the message and the kind.
+impl From<film::Error> for Error {
+    fn from(e: film::Error) -> Self {
+        match e {
+            film::Error::Io { file, source } => Error::Io { file, source },
+            film::Error::Image { file, message } => Error::Image { file, message },
+            film::Error::Invalid(m) => Error::Invalid(m),
+        }
+    }
+}
+
 impl Error {
     pub fn scene(file: impl Into<PathBuf>, field: impl Into<String>, message: impl Into<String>) -> Self {
         Error::Scene { file: file.into(), field: field.into(), message: message.into() }

@@ -1,4 +1,4 @@
-//! Fuzz tests of the renderer's safetensors reader, `Descriptors::read_safetensors` (the
+//! Fuzz tests of the film crate's safetensors reader, `Descriptors::read_safetensors` (the
 //! per-sample path descriptors of a training shot), fed mutated copies of a descriptor file and
 //! arbitrary bytes behind a header length. It must return `Ok` or an error, never panic, hang or
 //! allocate beyond the cap (the harness: fuzz_support/mod.rs). The denoiser's weight files have

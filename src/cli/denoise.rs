@@ -7,9 +7,8 @@ use denoiser::method::Method;
 use denoiser::metrics;
 use denoiser::weights::{self, Loaded};
 use renderer::film::descriptors::Descriptors;
-use renderer::film::{self, Frame, PixelBuffer};
+use renderer::film::{self, Frame};
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 #[derive(Args)]
 pub struct DenoiseArgs {
@@ -23,7 +22,7 @@ pub struct DenoiseArgs {
     /// Denoiser: guided (the paper's method), g (KPCN on G-buffers), p (KPCN on P-buffers),
     /// both (KPCN on G- and P-buffers), or oidn (Intel Open Image Denoise, the baseline; installed
     /// into target/oidn-venv from PyPI the first time).
-    #[arg(long, default_value = "guided", value_parser = parse_model)]
+    #[arg(long, default_value = "guided")]
     pub model: Model,
     /// Weight file (default: denoiser/weights/<model>-default.safetensors).
     #[arg(long)]
@@ -71,33 +70,32 @@ pub enum Model {
     Oidn,
 }
 
-pub fn parse_model(s: &str) -> std::result::Result<Model, String> {
-    if s == "oidn" {
-        return Ok(Model::Oidn);
+impl Model {
+    /// Every model, in the order help texts list them: the methods' own order, then OIDN.
+    pub const ALL: [Model; 5] = [Model::Net(Method::G), Model::Net(Method::P), Model::Net(Method::Both), Model::Net(Method::Guided), Model::Oidn];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Model::Net(m) => m.name(),
+            Model::Oidn => "oidn",
+        }
     }
-    Method::parse(s).map(Model::Net).ok_or_else(|| format!("unknown model `{s}` (expected guided, g, p, both or oidn)"))
 }
 
-/// Where the shipped weights of `method` live: `denoiser/weights/<method>-default.safetensors`
-/// under the current directory if that exists, else under the source tree this binary was built
-/// from.
-pub fn default_weights(method: Method) -> PathBuf {
-    let rel = PathBuf::from("denoiser/weights").join(format!("{}-default.safetensors", method.name()));
-    if rel.exists() {
-        return rel;
+/// The methods' names come from `Method` (denoiser/src/names.rs); only `oidn` is added here.
+impl clap::ValueEnum for Model {
+    fn value_variants<'a>() -> &'a [Self] {
+        &Model::ALL
     }
-    let built = Path::new(env!("CARGO_MANIFEST_DIR")).join(&rel);
-    if built.exists() {
-        built
-    } else {
-        rel
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.name()))
     }
 }
 
 /// Loads the weights for `method` (from `file`, or the default file), and checks that they are
 /// weights of that method.
 pub fn load_weights(method: Method, file: Option<&Path>) -> Result<Loaded> {
-    let path = file.map(Path::to_path_buf).unwrap_or_else(|| default_weights(method));
+    let path = file.map(Path::to_path_buf).unwrap_or_else(|| weights::default_path(method));
     if !path.exists() {
         if file.is_some() {
             bail!("weight file {} does not exist", path.display());
@@ -124,40 +122,13 @@ pub struct DenoiseRun {
     pub peak_extra_bytes: usize,
 }
 
-/// Preprocesses and denoises a frame in memory. The descriptors move from the frame into the
-/// prepared image (they are the largest buffer; inference normalises them as it reads them).
+/// [`infer::denoise_frame`] on the CPU, with the peak heap it took (only the binary has the
+/// counting allocator).
 pub fn denoise_frame(frame: &mut Frame, loaded: &Loaded, opts: &InferOptions) -> Result<DenoiseRun> {
     let base = crate::alloc_stats::reset_peak();
-    let t = Instant::now();
-    if loaded.method.needs_descriptors() && frame.descriptors.is_none() {
-        bail!("the {} model needs per-sample path descriptors, and the frame has none", loaded.method);
-    }
-    let prepared = denoiser::preprocess::prepare_for_inference(frame)?;
-    let prepare_s = t.elapsed().as_secs_f64();
-    let denoised = infer::denoise(&loaded.model, &loaded.config, &prepared, &frame.radiance.mean, opts, &denoiser::cpu_device())?;
+    let run = infer::denoise_frame(frame, loaded, opts, &denoiser::cpu_device())?;
     let peak_extra_bytes = crate::alloc_stats::peak().saturating_sub(base);
-    Ok(DenoiseRun { denoised, prepare_s, peak_extra_bytes })
-}
-
-/// A frame holding only the denoised radiance (variance 0: it is no longer a sample mean).
-pub fn denoised_frame(d: &Denoised, spp: u32) -> Frame {
-    let n = d.width * d.height;
-    let mut radiance = PixelBuffer::new(3, n);
-    radiance.mean.copy_from_slice(&d.radiance);
-    Frame {
-        width: d.width as u32,
-        height: d.height as u32,
-        spp,
-        radiance,
-        diffuse: None,
-        specular: None,
-        albedo: None,
-        normal: None,
-        depth: None,
-        depth_scale: 1.0,
-        descriptors: None,
-        nonfinite_samples: 0,
-    }
+    Ok(DenoiseRun { denoised: run.denoised, prepare_s: run.prepare_s, peak_extra_bytes })
 }
 
 /// W_G of both branches side by side, viridis-coloured, each under a label.
@@ -309,7 +280,7 @@ fn run_oidn(a: &DenoiseArgs) -> Result<()> {
 
 pub fn write_outputs(d: &Denoised, spp: u32, output: &Path, png: Option<&Path>, weights_png: Option<&Path>) -> Result<()> {
     ensure_parent(output)?;
-    film::exr_io::write_frame(&denoised_frame(d, spp), output).with_context(|| format!("writing {}", output.display()))?;
+    film::exr_io::write_frame(&infer::denoised_frame(d, spp), output).with_context(|| format!("writing {}", output.display()))?;
     if let Some(p) = png {
         ensure_parent(p)?;
         film::png::write_radiance(p, d.width as u32, d.height as u32, &d.radiance, 0.0)?;

@@ -47,7 +47,7 @@ pub struct RenderArgs {
     /// Image Denoise, the baseline), or none. `-o` and `--png` then get the denoised image.
     /// Records only the buffers the model needs (per-sample descriptors only for p, both and
     /// guided).
-    #[arg(long, default_value = "none", value_parser = parse_denoise)]
+    #[arg(long, default_value = "none")]
     pub denoise: DenoiseModel,
     /// Weight file for --denoise (default: denoiser/weights/<model>-default.safetensors).
     #[arg(long)]
@@ -79,11 +79,16 @@ pub struct RenderArgs {
 #[derive(Clone, Copy, Debug)]
 pub struct DenoiseModel(pub Option<Model>);
 
-fn parse_denoise(s: &str) -> std::result::Result<DenoiseModel, String> {
-    if s == "none" {
-        Ok(DenoiseModel(None))
-    } else {
-        dn::parse_model(s).map(|m| DenoiseModel(Some(m)))
+impl clap::ValueEnum for DenoiseModel {
+    fn value_variants<'a>() -> &'a [Self] {
+        const ALL: [DenoiseModel; 6] = {
+            let m = Model::ALL;
+            [DenoiseModel(Some(m[0])), DenoiseModel(Some(m[1])), DenoiseModel(Some(m[2])), DenoiseModel(Some(m[3])), DenoiseModel(Some(m[4])), DenoiseModel(None)]
+        };
+        &ALL
+    }
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.0.map_or("none", Model::name)))
     }
 }
 

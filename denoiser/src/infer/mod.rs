@@ -40,11 +40,13 @@ use crate::method::{Method, MethodModel};
 use crate::model::DenoiserConfig;
 use crate::preprocess::PreparedImage;
 
+mod frame;
 mod path_stage;
 mod tiles;
 mod timing;
 mod window;
 
+pub use frame::{denoise_frame, denoised_frame, FrameError, FrameRun};
 pub use path_stage::{pathnet_radius, CHUNK_SAMPLE_PIXELS};
 pub use tiles::{alignment, auto_tile, context, unet_window_side, window_side};
 pub use timing::Timings;

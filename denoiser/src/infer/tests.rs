@@ -92,7 +92,7 @@ fn tiled_equals_untiled() {
 fn records_equal_planes() {
     let d = crate::cpu_device();
     let (w, h, s) = (70, 53, 3);
-    let mut rec = renderer::film::descriptors::Descriptors::new(w as u32, h as u32, s as u32 + 1);
+    let mut rec = film::descriptors::Descriptors::new(w as u32, h as u32, s as u32 + 1);
     let mut rng = SplitMix64::new(8);
     for v in rec.data.iter_mut() {
         *v = (rng.next_f64() * 20.0 - 5.0) as f32;

@@ -1,5 +1,5 @@
 use super::*;
-use renderer::film::Descriptors;
+use film::Descriptors;
 
 const W: usize = 3;
 const H: usize = 2;

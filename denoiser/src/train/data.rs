@@ -4,8 +4,8 @@
 use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
-use renderer::film::descriptors::{field, FIELDS};
-use renderer::film::{exr_io, Descriptors};
+use film::descriptors::{field, FIELDS};
+use film::{exr_io, Descriptors};
 
 use super::augment::{self, Dihedral};
 use super::patches::{self, PatchSampler, Sampling};

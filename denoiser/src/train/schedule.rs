@@ -100,9 +100,11 @@ impl Ablation {
     }
 
     pub fn parse(s: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|a| a.name() == s)
+        s.parse().ok()
     }
 }
+
+crate::names::named!(Ablation, "ablation");
 
 /// The loss of the finetune stage (on the recombined radiance).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]

@@ -8,8 +8,8 @@ use checkpoint::flat_values;
 use data::Shot;
 use patches::PatchSampler;
 use schedule::LrShape;
-use renderer::film::descriptors::{field, FIELDS};
-use renderer::film::{Descriptors, Frame, PixelBuffer};
+use film::descriptors::{field, FIELDS};
+use film::{Descriptors, Frame, PixelBuffer};
 use schedule::ScheduleOptions;
 
 fn tiny() -> DenoiserConfig {

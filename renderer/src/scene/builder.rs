@@ -14,9 +14,8 @@ use glam::Vec3;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-/// Largest accepted image side and pixel count of a render.
-pub const MAX_RESOLUTION_SIDE: u32 = 16384;
-pub const MAX_RESOLUTION_PIXELS: u64 = 1 << 26;
+/// Largest accepted image side and pixel count of a render (shared with the EXR reader).
+pub use ::film::{MAX_RESOLUTION_PIXELS, MAX_RESOLUTION_SIDE};
 
 /// Vertical field of view (degrees) of a camera made up to frame the scene.
 pub const FRAMING_FOV_DEG: f32 = 40.0;

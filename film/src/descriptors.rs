@@ -63,7 +63,7 @@ impl Descriptors {
             "pixguide path descriptors v1; fields: 0-2 radiance_no_weight RGB, 3-5 light_intensity RGB, 6-23 throughput 6x RGB vertex-major, 24-29 bounce_type bitmask, 30-35 roughness, 36 path_weight".to_string(),
         );
         let data = safetensors::serialize([("descriptors", view)], Some(meta)).map_err(|e| Error::image(path, e))?;
-        crate::film::exr_io::write_atomically(path, &data)
+        crate::exr_io::write_atomically(path, &data)
     }
 
     pub fn read_safetensors(path: &Path) -> Result<Descriptors> {
