@@ -10,11 +10,22 @@ fn pixguide(args: &[&str]) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
-/// Tensor bytes of a safetensors file (the metadata holds wall times, so files differ).
-fn tensors(path: &Path) -> Vec<(String, Vec<u8>)> {
+/// The raw bytes of a safetensors file, its header length and its parsed JSON header.
+fn header(path: &Path) -> (Vec<u8>, usize, serde_json::Value) {
     let bytes = std::fs::read(path).unwrap();
     let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
     let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + n]).unwrap();
+    (bytes, n, header)
+}
+
+/// The `__metadata__` of a weight file.
+fn metadata(path: &Path) -> serde_json::Value {
+    header(path).2["__metadata__"].clone()
+}
+
+/// Tensor bytes of a safetensors file (the metadata holds wall times, so files differ).
+fn tensors(path: &Path) -> Vec<(String, Vec<u8>)> {
+    let (bytes, n, header) = header(path);
     let mut out: Vec<(String, Vec<u8>)> = header
         .as_object()
         .unwrap()
@@ -97,10 +108,7 @@ fn train_g_p_guided_and_resume() {
     }
     for name in ["g", "p", "guided"] {
         let f = base.join("all").join(format!("{name}-half.safetensors"));
-        let bytes = std::fs::read(&f).unwrap();
-        let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
-        let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + n]).unwrap();
-        assert_eq!(header["__metadata__"]["pixguide.preset"], "half", "{name}-half");
+        assert_eq!(metadata(&f)["pixguide.preset"], "half", "{name}-half");
     }
     let mut g3 = vec!["train", "--method", "g", "--branch-steps", "3", "--finetune-steps", "1", "--val-every", "1", "--quiet", "-o"];
     let g3_out = out("g3.safetensors");
@@ -160,12 +168,10 @@ fn calibrate_writes_the_kept_exponent_and_nothing_else() {
     assert!(kept == 0.0 || kept == 1.0, "{stdout}");
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     assert_eq!(tensors(&out), tensors(&root.join(input)));
-    let bytes = std::fs::read(&out).unwrap();
-    let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
-    let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + n]).unwrap();
-    let config: serde_json::Value = serde_json::from_str(header["__metadata__"]["pixguide.config"].as_str().unwrap()).unwrap();
+    let meta = metadata(&out);
+    let config: serde_json::Value = serde_json::from_str(meta["pixguide.config"].as_str().unwrap()).unwrap();
     assert_eq!(config["mskp"]["guide_gain_exponent"].as_f64(), Some(kept));
-    let provenance = header["__metadata__"].to_string();
+    let provenance = meta.to_string();
     assert!(provenance.contains(&format!("guide_gain_exponent 0 -> {kept}")), "{provenance}");
     for (weights, exps, why) in [("denoiser/weights/g-default.safetensors", "--exponents=0,1", "no edge-stopping guides"), (input, "--exponents=-1", "finite values in [0, 4]")] {
         let o = Command::new(env!("CARGO_BIN_EXE_pixguide"))
