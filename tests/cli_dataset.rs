@@ -10,7 +10,20 @@ fn dataset(out: &Path, seed: &str) -> String {
 
 fn dataset_with(out: &Path, seed: &str, extra: &[&str]) -> String {
     let o = Command::new(env!("CARGO_BIN_EXE_pixguide"))
-        .args(["dataset", "--scenes", "scenes/cornell-box/scene.toml", "--spp", "1,2", "--ref-spp", "4", "--size", "16x16", "--quiet", "--seed", seed])
+        .args([
+            "dataset",
+            "--scenes",
+            "scenes/cornell-box/scene.toml",
+            "--spp",
+            "1,2",
+            "--ref-spp",
+            "4",
+            "--size",
+            "16x16",
+            "--quiet",
+            "--seed",
+            seed,
+        ])
         .args(extra)
         .arg("-o")
         .arg(out)

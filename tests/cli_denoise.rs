@@ -68,9 +68,27 @@ fn render_and_denoise_in_one_process() {
     let (out, png, wpng, noisy) = (d.join("den.exr"), d.join("den.png"), d.join("wg.png"), d.join("noisy.exr"));
     let stdout = ok(
         &pixguide(&[
-            "render", "scenes/cornell-box/scene.toml", "--spp", "2", "-q", "--denoise", "guided", "--weights", s(&weights),
-            "-o", s(&out), "--png", s(&png), "--weights-png", s(&wpng), "--noisy", s(&noisy), "--reference", s(&reference),
-            "--tile", "96",
+            "render",
+            "scenes/cornell-box/scene.toml",
+            "--spp",
+            "2",
+            "-q",
+            "--denoise",
+            "guided",
+            "--weights",
+            s(&weights),
+            "-o",
+            s(&out),
+            "--png",
+            s(&png),
+            "--weights-png",
+            s(&wpng),
+            "--noisy",
+            s(&noisy),
+            "--reference",
+            s(&reference),
+            "--tile",
+            "96",
         ]),
         "render --denoise",
     );
@@ -122,13 +140,37 @@ fn clear_errors() {
     let err = failed(&pixguide(&["denoise", s(&plain), "--model", "g", "--weights", s(&missing)]), "missing weights");
     assert!(err.contains("nope.safetensors") && err.contains("does not exist"), "{err}");
     let err = failed(
-        &pixguide(&["render", "scenes/cornell-box/scene.toml", "--spp", "1", "-q", "--denoise", "p", "--weights", s(&missing), "-o", s(&d.join("x.exr"))]),
+        &pixguide(&[
+            "render",
+            "scenes/cornell-box/scene.toml",
+            "--spp",
+            "1",
+            "-q",
+            "--denoise",
+            "p",
+            "--weights",
+            s(&missing),
+            "-o",
+            s(&d.join("x.exr")),
+        ]),
         "render with missing weights",
     );
     assert!(err.contains("nope.safetensors"), "{err}");
     // Weights of another model than asked for.
     let err = failed(
-        &pixguide(&["render", "scenes/cornell-box/scene.toml", "--spp", "1", "-q", "--denoise", "guided", "--weights", s(&g), "-o", s(&d.join("x.exr"))]),
+        &pixguide(&[
+            "render",
+            "scenes/cornell-box/scene.toml",
+            "--spp",
+            "1",
+            "-q",
+            "--denoise",
+            "guided",
+            "--weights",
+            s(&g),
+            "-o",
+            s(&d.join("x.exr")),
+        ]),
         "wrong model",
     );
     assert!(err.contains("g model") && err.contains("--model g"), "{err}");

@@ -19,7 +19,8 @@ fn scene_list(dir: &Path, with_reference: bool) -> PathBuf {
     std::fs::create_dir_all(dir.join("references")).unwrap();
     if with_reference {
         for ext in ["exr", "json"] {
-            std::fs::copy(root().join(format!("scenes/references/cornell-box.{ext}")), dir.join(format!("references/cornell-box.{ext}"))).unwrap();
+            std::fs::copy(root().join(format!("scenes/references/cornell-box.{ext}")), dir.join(format!("references/cornell-box.{ext}")))
+                .unwrap();
         }
     }
     let list = dir.join("list.txt");
@@ -47,8 +48,21 @@ fn eval_tiny_configuration_writes_the_page_and_resumes() {
     let list = scene_list(&base.join("scenes"), true);
     let out = base.join("out/results.md");
     let args = [
-        "--scenes", list.to_str().unwrap(), "--spp", "2,4", "--methods", "noisy,g,guided", "--breakdown-size", "64",
-        "--pictures", "cornell-box", "--picture-spp", "2", "-q", "--out", out.to_str().unwrap(),
+        "--scenes",
+        list.to_str().unwrap(),
+        "--spp",
+        "2,4",
+        "--methods",
+        "noisy,g,guided",
+        "--breakdown-size",
+        "64",
+        "--pictures",
+        "cornell-box",
+        "--picture-spp",
+        "2",
+        "-q",
+        "--out",
+        out.to_str().unwrap(),
     ];
     let first = summary(&eval(&args));
     // 2 spp × 3 methods + 4 spp × 3 methods + 2 breakdown rows; two renders per (scene, spp)
@@ -97,14 +111,20 @@ fn eval_tiny_configuration_writes_the_page_and_resumes() {
         ("cornell-box-2spp-weights.png", 3 * 128, 2 * (128 + 28)),
     ] {
         let img = image::open(dir.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
-        assert!(img.width() >= min_w && img.width() < 2 * min_w && img.height() >= min_h && img.height() < 2 * min_h, "{f}: {}×{}", img.width(), img.height());
+        assert!(
+            img.width() >= min_w && img.width() < 2 * min_w && img.height() >= min_h && img.height() < 2 * min_h,
+            "{f}: {}×{}",
+            img.width(),
+            img.height()
+        );
         assert!(md.contains(&format!("results/{f}")), "{f} not linked");
     }
     // The zoom row shows an image, not the background: the reference's zoom (last column,
     // second row) has many distinct colours.
     let sheet = image::open(dir.join("cornell-box-2spp-images.png")).unwrap().to_rgb8();
     let (x0, y0) = (3 * (128 + 4), 128 + 28 + 4 + 28);
-    let mut colours: Vec<[u8; 3]> = (0..128).flat_map(|y| (0..128).map(move |x| (x, y))).map(|(x, y)| sheet.get_pixel(x0 + x, y0 + y).0).collect();
+    let mut colours: Vec<[u8; 3]> =
+        (0..128).flat_map(|y| (0..128).map(move |x| (x, y))).map(|(x, y)| sheet.get_pixel(x0 + x, y0 + y).0).collect();
     colours.sort_unstable();
     colours.dedup();
     assert!(colours.len() > 50, "{} colours in the reference zoom", colours.len());
@@ -130,8 +150,21 @@ fn eval_reports_missing_weights_and_rejects_bad_input() {
     std::fs::copy(root().join("denoiser/weights/g-default.safetensors"), weights.join("g-default.safetensors")).unwrap();
     let out = base.join("out/results.md");
     let o = eval(&[
-        "--scenes", list.to_str().unwrap(), "--spp", "2", "--methods", "g,both", "--weights-dir", weights.to_str().unwrap(),
-        "--breakdown-size", "0", "--pictures", "none", "-q", "--out", out.to_str().unwrap(),
+        "--scenes",
+        list.to_str().unwrap(),
+        "--spp",
+        "2",
+        "--methods",
+        "g,both",
+        "--weights-dir",
+        weights.to_str().unwrap(),
+        "--breakdown-size",
+        "0",
+        "--pictures",
+        "none",
+        "-q",
+        "--out",
+        out.to_str().unwrap(),
     ]);
     let s = summary(&o);
     // noisy and g at 2 spp; one render (no method needs descriptors).

@@ -45,8 +45,19 @@ fn logs(dir: &Path) -> Vec<String> {
     b.extend((1..=5).map(|s| step(1, s, 6.0)));
     b.push(val(1, 5, 15, 0.05, None));
     let stage = |from: u32| format!("{{\"event\":\"stage\",\"stage\":0,\"kind\":\"joint\",\"steps\":400,\"from_step\":{from}}}");
-    let c = vec![stage(0), val(0, 100, 100, 0.08, Some(30.0)), val(0, 200, 200, 0.06, Some(60.0)), stage(200), val(0, 300, 300, 0.059, Some(100.0)), val(0, 400, 400, 0.058, Some(130.0))];
-    vec![write(dir, "run-a.safetensors.log.jsonl", &a), write(dir, "run-b.safetensors.log.jsonl", &b), write(dir, "run-c.safetensors.log.jsonl", &c)]
+    let c = vec![
+        stage(0),
+        val(0, 100, 100, 0.08, Some(30.0)),
+        val(0, 200, 200, 0.06, Some(60.0)),
+        stage(200),
+        val(0, 300, 300, 0.059, Some(100.0)),
+        val(0, 400, 400, 0.058, Some(130.0)),
+    ];
+    vec![
+        write(dir, "run-a.safetensors.log.jsonl", &a),
+        write(dir, "run-b.safetensors.log.jsonl", &b),
+        write(dir, "run-c.safetensors.log.jsonl", &c),
+    ]
 }
 
 /// The table row of `run` as its cells.
@@ -110,7 +121,8 @@ fn bad_logs_are_errors_naming_the_file() {
         assert!(!o.status.success());
         String::from_utf8_lossy(&o.stderr).into_owned()
     };
-    let malformed = write(&dir, "malformed.log.jsonl", &[step(0, 1, 1.0), val(0, 1, 1, 0.1, None), "{\"event\":\"val\",\"stage\":0,".into()]);
+    let malformed =
+        write(&dir, "malformed.log.jsonl", &[step(0, 1, 1.0), val(0, 1, 1, 0.1, None), "{\"event\":\"val\",\"stage\":0,".into()]);
     let e = run(&malformed);
     assert!(e.contains(&format!("{malformed}, line 3, column 25: not valid JSON")), "{e}");
     let missing = write(&dir, "missing.log.jsonl", &[step(0, 1, 1.0), "{\"event\":\"val\",\"rel_mse\":0.1}".into()]);

@@ -28,7 +28,17 @@ fn render_with_aovs_writes_every_file() {
     assert!(out.status.success(), "render failed: {}", String::from_utf8_lossy(&out.stderr));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("samples/s") && stdout.contains("rays/s"), "summary line missing: {stdout}");
-    for f in ["cornell.exr", "cornell.png", "cornell.descriptors.safetensors", "cornell.contact.png", "cornell.albedo.png", "cornell.normal.png", "cornell.depth.png", "cornell.diffuse.png", "cornell.specular.png"] {
+    for f in [
+        "cornell.exr",
+        "cornell.png",
+        "cornell.descriptors.safetensors",
+        "cornell.contact.png",
+        "cornell.albedo.png",
+        "cornell.normal.png",
+        "cornell.depth.png",
+        "cornell.diffuse.png",
+        "cornell.specular.png",
+    ] {
         let p = d.join(f);
         assert!(p.metadata().map(|m| m.len() > 0).unwrap_or(false), "{} was not written", p.display());
     }

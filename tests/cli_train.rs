@@ -47,9 +47,40 @@ fn train_g_p_guided_and_resume() {
     std::fs::remove_dir_all(&base).ok();
     let data = base.join("data");
     let d = data.to_str().unwrap();
-    pixguide(&["dataset", "--scenes", "scenes/cornell-box/scene.toml", "--shots", "2", "--spp", "2,4", "--ref-spp", "8", "--size", "32x32", "--quiet", "-o", d]);
+    pixguide(&[
+        "dataset",
+        "--scenes",
+        "scenes/cornell-box/scene.toml",
+        "--shots",
+        "2",
+        "--spp",
+        "2,4",
+        "--ref-spp",
+        "8",
+        "--size",
+        "32x32",
+        "--quiet",
+        "-o",
+        d,
+    ]);
     let out = |n: &str| base.join(n).to_str().unwrap().to_string();
-    let common = ["--data", d, "--patch", "24", "--batch", "2", "--branch-steps", "2", "--finetune-steps", "1", "--joint-steps", "2", "--val-every", "1", "--quiet"];
+    let common = [
+        "--data",
+        d,
+        "--patch",
+        "24",
+        "--batch",
+        "2",
+        "--branch-steps",
+        "2",
+        "--finetune-steps",
+        "1",
+        "--joint-steps",
+        "2",
+        "--val-every",
+        "1",
+        "--quiet",
+    ];
     let train = |extra: &[&str]| {
         let mut a = vec!["train"];
         a.extend_from_slice(&common);
@@ -59,7 +90,16 @@ fn train_g_p_guided_and_resume() {
     let g = train(&["--method", "g", "-o", &out("g.safetensors")]);
     assert!(g.starts_with("trained g (default): 3 steps"), "{g}");
     train(&["--method", "p", "-o", &out("p.safetensors")]);
-    let guided = train(&["--method", "guided", "--from-g", &out("g.safetensors"), "--from-p", &out("p.safetensors"), "-o", &out("guided.safetensors")]);
+    let guided = train(&[
+        "--method",
+        "guided",
+        "--from-g",
+        &out("g.safetensors"),
+        "--from-p",
+        &out("p.safetensors"),
+        "-o",
+        &out("guided.safetensors"),
+    ]);
     assert!(guided.starts_with("trained guided (default): 2 steps"), "{guided}");
     // The guided model holds D_G from G and D_P + PathNet from P, plus E.
     let names: Vec<String> = tensors(&base.join("guided.safetensors")).into_iter().map(|t| t.0).collect();
@@ -74,7 +114,21 @@ fn train_g_p_guided_and_resume() {
     // A g run can continue from a trained g (warm start: the finetune alone here), and moves it;
     // a P model is refused as its start.
     let g_file = out("g.safetensors");
-    let mut w = vec!["train", "--method", "g", "--from-g", &g_file, "--branch-steps", "0", "--finetune-steps", "1", "--val-every", "1", "--quiet", "-o"];
+    let mut w = vec![
+        "train",
+        "--method",
+        "g",
+        "--from-g",
+        &g_file,
+        "--branch-steps",
+        "0",
+        "--finetune-steps",
+        "1",
+        "--val-every",
+        "1",
+        "--quiet",
+        "-o",
+    ];
     let gw = out("gw.safetensors");
     w.push(&gw);
     w.extend_from_slice(&common[..6]);
@@ -84,12 +138,28 @@ fn train_g_p_guided_and_resume() {
     assert_eq!(tw.iter().map(|t| &t.0).collect::<Vec<_>>(), tg.iter().map(|t| &t.0).collect::<Vec<_>>());
     assert_ne!(tw, tg, "the warm-started finetune step changed nothing");
     let o = Command::new(env!("CARGO_BIN_EXE_pixguide"))
-        .args(["train", "--data", d, "--method", "g", "--from-p", &out("p.safetensors"), "--patch", "24", "-o", &out("x.safetensors"), "--quiet"])
+        .args([
+            "train",
+            "--data",
+            d,
+            "--method",
+            "g",
+            "--from-p",
+            &out("p.safetensors"),
+            "--patch",
+            "24",
+            "-o",
+            &out("x.safetensors"),
+            "--quiet",
+        ])
         .output()
         .unwrap();
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--from-p"), "{}", String::from_utf8_lossy(&o.stderr));
     // Guided without its pretrained models is a clear error, not a crash.
-    let o = Command::new(env!("CARGO_BIN_EXE_pixguide")).args(["train", "--data", d, "--method", "guided", "--patch", "24", "-o", &out("x.safetensors"), "--quiet"]).output().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_pixguide"))
+        .args(["train", "--data", d, "--method", "guided", "--patch", "24", "-o", &out("x.safetensors"), "--quiet"])
+        .output()
+        .unwrap();
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--from-g"));
     // --all trains the whole comparison, reading each kind of dataset once for all ten runs;
     // at --all-scale 0.001 its g run has 3 branch steps and 1 finetune step (the plan's 2900 + 400),
@@ -145,8 +215,44 @@ fn backend_tch() {
     {
         let data = base.join("data");
         let d = data.to_str().unwrap();
-        pixguide(&["dataset", "--scenes", "scenes/cornell-box/scene.toml", "--shots", "2", "--spp", "2", "--ref-spp", "8", "--size", "32x32", "--quiet", "-o", d]);
-        let g = pixguide(&["train", "--backend", "tch", "--data", d, "--patch", "24", "--batch", "2", "--branch-steps", "2", "--finetune-steps", "0", "--val-every", "1", "--quiet", "--method", "g", "-o", out.to_str().unwrap()]);
+        pixguide(&[
+            "dataset",
+            "--scenes",
+            "scenes/cornell-box/scene.toml",
+            "--shots",
+            "2",
+            "--spp",
+            "2",
+            "--ref-spp",
+            "8",
+            "--size",
+            "32x32",
+            "--quiet",
+            "-o",
+            d,
+        ]);
+        let g = pixguide(&[
+            "train",
+            "--backend",
+            "tch",
+            "--data",
+            d,
+            "--patch",
+            "24",
+            "--batch",
+            "2",
+            "--branch-steps",
+            "2",
+            "--finetune-steps",
+            "0",
+            "--val-every",
+            "1",
+            "--quiet",
+            "--method",
+            "g",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
         assert!(g.starts_with("trained g (default): 2 steps"), "{g}");
     }
 }
@@ -160,11 +266,31 @@ fn calibrate_writes_the_kept_exponent_and_nothing_else() {
     std::fs::remove_dir_all(&base).ok();
     let data = base.join("data");
     let d = data.to_str().unwrap();
-    pixguide(&["dataset", "--scenes", "scenes/cornell-box/scene.toml", "--shots", "0", "--spp", "2,4", "--ref-spp", "8", "--size", "32x32", "--quiet", "-o", d]);
+    pixguide(&[
+        "dataset",
+        "--scenes",
+        "scenes/cornell-box/scene.toml",
+        "--shots",
+        "0",
+        "--spp",
+        "2,4",
+        "--ref-spp",
+        "8",
+        "--size",
+        "32x32",
+        "--quiet",
+        "-o",
+        d,
+    ]);
     let input = "denoiser/weights/edge-noise/g-default.safetensors";
     let out = base.join("g.safetensors");
-    let stdout = pixguide(&["calibrate", "--data", d, "--weights", input, "--exponents", "0,1", "--patch", "24", "-o", out.to_str().unwrap()]);
-    let kept: f64 = stdout.strip_prefix("kept γ = ").and_then(|s| s.split(' ').next()).and_then(|s| s.parse().ok()).unwrap_or_else(|| panic!("{stdout}"));
+    let stdout =
+        pixguide(&["calibrate", "--data", d, "--weights", input, "--exponents", "0,1", "--patch", "24", "-o", out.to_str().unwrap()]);
+    let kept: f64 = stdout
+        .strip_prefix("kept γ = ")
+        .and_then(|s| s.split(' ').next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("{stdout}"));
     assert!(kept == 0.0 || kept == 1.0, "{stdout}");
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     assert_eq!(tensors(&out), tensors(&root.join(input)));
@@ -173,9 +299,23 @@ fn calibrate_writes_the_kept_exponent_and_nothing_else() {
     assert_eq!(config["mskp"]["guide_gain_exponent"].as_f64(), Some(kept));
     let provenance = meta.to_string();
     assert!(provenance.contains(&format!("guide_gain_exponent 0 -> {kept}")), "{provenance}");
-    for (weights, exps, why) in [("denoiser/weights/g-default.safetensors", "--exponents=0,1", "no edge-stopping guides"), (input, "--exponents=-1", "finite values in [0, 4]")] {
+    for (weights, exps, why) in [
+        ("denoiser/weights/g-default.safetensors", "--exponents=0,1", "no edge-stopping guides"),
+        (input, "--exponents=-1", "finite values in [0, 4]"),
+    ] {
         let o = Command::new(env!("CARGO_BIN_EXE_pixguide"))
-            .args(["calibrate", "--data", d, "--weights", weights, exps, "--patch", "24", "-o", base.join("x.safetensors").to_str().unwrap()])
+            .args([
+                "calibrate",
+                "--data",
+                d,
+                "--weights",
+                weights,
+                exps,
+                "--patch",
+                "24",
+                "-o",
+                base.join("x.safetensors").to_str().unwrap(),
+            ])
             .current_dir(env!("CARGO_MANIFEST_DIR"))
             .output()
             .unwrap();

@@ -28,7 +28,8 @@ fn test_scenes() -> Vec<(String, PathBuf)> {
 }
 
 fn load(name: &str, path: &Path) -> (Scene, Frame) {
-    let reference = exr_io::read_frame(&root().join(format!("scenes/references/{name}.exr"))).unwrap_or_else(|e| panic!("reference of {name}: {e}"));
+    let reference =
+        exr_io::read_frame(&root().join(format!("scenes/references/{name}.exr"))).unwrap_or_else(|e| panic!("reference of {name}: {e}"));
     let mut scene = Scene::load(path).unwrap_or_else(|e| panic!("{e}"));
     scene.camera.width = reference.width;
     scene.camera.height = reference.height;
@@ -49,7 +50,12 @@ fn low_spp_renders_agree_with_their_references() {
     let mut failures = Vec::new();
     for (name, path) in test_scenes() {
         let (scene, reference) = load(&name, &path);
-        let opts = RenderOptions { spp: 32, seed: 12345, request: BufferRequest::RADIANCE_ONLY, ..RenderOptions::from_scene(&scene, BufferRequest::RADIANCE_ONLY) };
+        let opts = RenderOptions {
+            spp: 32,
+            seed: 12345,
+            request: BufferRequest::RADIANCE_ONLY,
+            ..RenderOptions::from_scene(&scene, BufferRequest::RADIANCE_ONLY)
+        };
         let (frame, _) = render(&scene, &opts, &|_| {}).unwrap();
         assert!(frame.all_finite());
         let n = frame.pixels();

@@ -4,8 +4,8 @@
 use std::path::{Path, PathBuf};
 
 use denoiser::infer::{self, InferOptions};
-use denoiser::metrics::{one_minus_ssim, rel_mse, ToneMap};
 use denoiser::method::Method;
+use denoiser::metrics::{one_minus_ssim, rel_mse, ToneMap};
 use renderer::film::{exr_io, BufferRequest};
 use renderer::integrator::{self, RenderOptions};
 use renderer::scene::Scene;
@@ -17,7 +17,13 @@ fn root() -> PathBuf {
 /// Renders test scene `scene` (path under scenes/) at its reference's size, `spp` and seed 4242,
 /// denoises it with the shipped `<stem>.safetensors` (a `method` model) and returns the noisy
 /// frame, the denoised radiance and the reference.
-fn render_and_denoise(scene: &str, reference: &str, spp: u32, stem: &str, method: Method) -> (renderer::film::Frame, Vec<f32>, renderer::film::Frame) {
+fn render_and_denoise(
+    scene: &str,
+    reference: &str,
+    spp: u32,
+    stem: &str,
+    method: Method,
+) -> (renderer::film::Frame, Vec<f32>, renderer::film::Frame) {
     let weights = root().join(format!("denoiser/weights/{stem}.safetensors"));
     let device = denoiser::cpu_device();
     let loaded = denoiser::weights::load(&weights, &device).unwrap_or_else(|e| panic!("shipped weights {}: {e}", weights.display()));
@@ -45,7 +51,11 @@ fn errors(stem: &str, method: Method) -> ((f64, f64), (f64, f64)) {
     let denoised = rel_mse(&out, &reference.radiance.mean, w, h, ToneMap::Paper, 0);
     let s_noisy = one_minus_ssim(&frame.radiance.mean, &reference.radiance.mean, w, h, ToneMap::Paper, 0);
     let s_denoised = one_minus_ssim(&out, &reference.radiance.mean, w, h, ToneMap::Paper, 0);
-    println!("{stem}: relMSE noisy {noisy:.5} → denoised {denoised:.5} ({:.2}× lower); 1-SSIM {s_noisy:.4} → {s_denoised:.4} ({:.2}× lower)", noisy / denoised, s_noisy / s_denoised);
+    println!(
+        "{stem}: relMSE noisy {noisy:.5} → denoised {denoised:.5} ({:.2}× lower); 1-SSIM {s_noisy:.4} → {s_denoised:.4} ({:.2}× lower)",
+        noisy / denoised,
+        s_noisy / s_denoised
+    );
     ((noisy, denoised), (s_noisy, s_denoised))
 }
 
@@ -96,7 +106,8 @@ fn shipped_swap_guided_model_beats_the_noisy_render() {
 /// share fades with the sample count except on black diffuse pixels, and they run with them.
 #[test]
 fn shipped_edge_noise_guided_model_beats_the_noisy_render() {
-    let l = denoiser::weights::load(&root().join("denoiser/weights/edge-noise/guided-default.safetensors"), &denoiser::cpu_device()).unwrap();
+    let l =
+        denoiser::weights::load(&root().join("denoiser/weights/edge-noise/guided-default.safetensors"), &denoiser::cpu_device()).unwrap();
     let m = l.config.mskp.as_ref().expect("a U-Net model");
     assert_eq!(m.edge_stopping, denoiser::mskp::EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack);
     check("edge-noise/guided-default", Method::Guided);

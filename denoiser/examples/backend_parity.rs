@@ -21,10 +21,10 @@ use denoiser::infer::{self, InferOptions};
 use denoiser::method::{Method, MethodModel};
 use denoiser::model::{BranchInput, DenoiserConfig, Preset};
 use denoiser::preprocess::{InputTensors, TargetTensors};
-use denoiser::train::schedule::{LrShape, Stage, StageKind};
-use denoiser::train::stage_loss;
 use denoiser::rng::SplitMix64;
 use denoiser::train::checkpoint::parameters;
+use denoiser::train::schedule::{LrShape, Stage, StageKind};
+use denoiser::train::stage_loss;
 use denoiser::weights::{self, Provenance};
 use denoiser::Backend;
 use renderer::film::BufferRequest;
@@ -111,26 +111,31 @@ fn main() {
     }
     let init = parameters(&MethodModel::init(&cfg, method, &Backend::Flex.device().unwrap()));
     let moved = init.iter().zip(&pa).fold(0f32, |m, (i, a)| m.max(max_diff(&i.3, &a.3).0));
-    println!("trained parameters, tch vs flex: max |Δw| = {dw:.3e} (largest |w| {wmax:.3}; largest move of a weight in training {moved:.3e})");
+    println!(
+        "trained parameters, tch vs flex: max |Δw| = {dw:.3e} (largest |w| {wmax:.3}; largest move of a weight in training {moved:.3e})"
+    );
 
     let dir = std::env::temp_dir().join(format!("pixguide-parity-{}", std::process::id()));
     let mut worst = 0f32;
     let mut on_flex = Vec::new();
     for (trained_on, model) in &trained {
         let path = dir.join(format!("{}-{method}.safetensors", trained_on.name()));
-        let prov = Provenance { command: format!("backend_parity, trained on {}", trained_on.name()), steps: steps as u64, ..Default::default() };
+        let prov =
+            Provenance { command: format!("backend_parity, trained on {}", trained_on.name()), steps: steps as u64, ..Default::default() };
         weights::save(&path, model, &cfg, preset, &prov).expect("save weights");
         let mut images = Vec::new();
         for bk in backends {
             let device = bk.device().unwrap();
             let loaded = weights::load(&path, &device).expect("load weights");
             let t = std::time::Instant::now();
-            let out = infer::denoise(&loaded.model, &loaded.config, &prepared, &noisy, &InferOptions { tile: 0, batch: 1 }, &device).expect("denoise");
+            let out = infer::denoise(&loaded.model, &loaded.config, &prepared, &noisy, &InferOptions { tile: 0, batch: 1 }, &device)
+                .expect("denoise");
             println!("  weights trained on {}, denoised on {}: {:.2} s", trained_on.name(), bk.name(), t.elapsed().as_secs_f64());
             images.push(out);
         }
         let (d, m) = max_diff(&images[0].radiance, &images[1].radiance);
-        let mean = images[0].radiance.iter().zip(&images[1].radiance).map(|(x, y)| (x - y).abs() as f64).sum::<f64>() / images[0].radiance.len() as f64;
+        let mean = images[0].radiance.iter().zip(&images[1].radiance).map(|(x, y)| (x - y).abs() as f64).sum::<f64>()
+            / images[0].radiance.len() as f64;
         println!(
             "weights trained on {}: image on tch vs flex ({size}², {} values): max |Δ| = {d:.3e}, mean |Δ| = {mean:.3e}, largest value {m:.3}, max |Δ|/max = {:.3e}",
             trained_on.name(),

@@ -75,7 +75,14 @@ fn denoise_breakdown(size: usize, s: usize) {
     let model = MethodModel::init(&cfg, Method::Guided, &d);
     let n = size * size;
     let mut k = 0u64;
-    let mut r = |len: usize| -> Vec<f32> { (0..len).map(|_| { k = k.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407); (k >> 40) as f32 / (1u64 << 24) as f32 }).collect() };
+    let mut r = |len: usize| -> Vec<f32> {
+        (0..len)
+            .map(|_| {
+                k = k.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                (k >> 40) as f32 / (1u64 << 24) as f32
+            })
+            .collect()
+    };
     let img = PreparedImage {
         width: size,
         height: size,

@@ -18,7 +18,8 @@ fn main() -> Result<()> {
         return Err("usage: set_edge_stopping IN OUT VARIANT WHY".into());
     };
     let (input, output) = (PathBuf::from(input), PathBuf::from(output));
-    let variant: EdgeStopping = serde_json::from_value(serde_json::Value::String(variant.clone())).map_err(|e| format!("VARIANT {variant:?}: {e}"))?;
+    let variant: EdgeStopping =
+        serde_json::from_value(serde_json::Value::String(variant.clone())).map_err(|e| format!("VARIANT {variant:?}: {e}"))?;
     let device = denoiser::cpu_device();
     let mut loaded = weights::load(&input, &device)?;
     let Some(mskp) = loaded.config.mskp.as_mut() else {

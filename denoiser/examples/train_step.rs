@@ -16,14 +16,14 @@ use std::time::Instant;
 use denoiser::burn::grad_clipping::GradientClippingConfig;
 use denoiser::burn::optim::{AdamConfig, GradientsParams};
 use denoiser::burn::tensor::{Distribution, Tensor};
-use denoiser::method::{Method, MethodModel, Part};
 use denoiser::kpcn::{KpcnConfig, Variant};
 use denoiser::layers::conv_macs;
+use denoiser::method::{Method, MethodModel, Part};
 use denoiser::model::{BranchInput, DenoiserConfig, Preset};
 use denoiser::preprocess::{InputTensors, TargetTensors};
+use denoiser::rng::SplitMix64;
 use denoiser::train::schedule::{LrShape, Stage, StageKind};
 use denoiser::train::stage_loss;
-use denoiser::rng::SplitMix64;
 use denoiser::Backend;
 
 /// Forward MACs of one KPCN column over a `b`×`size`² input (valid convolutions).
@@ -82,7 +82,8 @@ fn main() {
     let method = args.get(5).map(|s| s.parse::<Method>().unwrap_or_else(|e| panic!("{e}"))).unwrap_or(Method::Guided);
     let cfg = preset.parse::<Preset>().unwrap_or_else(|e| panic!("{e}")).config();
     let backend_name = args.get(6).cloned().or_else(|| std::env::var("PIXGUIDE_BACKEND").ok()).unwrap_or_else(|| "flex".into());
-    let backend = Backend::parse(&backend_name).unwrap_or_else(|| panic!("unknown backend {backend_name}: expected one of {:?}", Backend::NAMES));
+    let backend =
+        Backend::parse(&backend_name).unwrap_or_else(|| panic!("unknown backend {backend_name}: expected one of {:?}", Backend::NAMES));
     let device = backend.training_device().unwrap_or_else(|e| panic!("{e}"));
     let mut model = MethodModel::init(&cfg, method, &device);
     let o = size - 2 * cfg.margin();
@@ -107,16 +108,14 @@ fn main() {
         descriptors: Tensor::random([b, spp, 36, size, size], u, d),
         spp,
     };
-    let inputs = InputTensors { diffuse: input(&device), specular: input(&device), path_weight: Tensor::zeros([b, 1, size, size], &device) };
+    let inputs =
+        InputTensors { diffuse: input(&device), specular: input(&device), path_weight: Tensor::zeros([b, 1, size, size], &device) };
     let t_diff = Tensor::<4>::random([b, 3, o, o], u, &device);
     let t_spec = Tensor::<4>::random([b, 3, o, o], u, &device);
     // The first stage's loss (per-branch L1, + 0.1·L_path where the method has PathNets), as training computes it.
     let targets = TargetTensors { total: t_diff.clone() + t_spec.clone(), diffuse: t_diff, specular: t_spec };
     let stage = Stage { kind: StageKind::Branches, steps: 1, lr_rest: None, lr_e: None, w_path: 0.1, shape: LrShape::Constant };
-    let mut optim = AdamConfig::new()
-        .with_epsilon(1e-8)
-        .with_grad_clipping(Some(GradientClippingConfig::Value(1.0)))
-        .init();
+    let mut optim = AdamConfig::new().with_epsilon(1e-8).with_grad_clipping(Some(GradientClippingConfig::Value(1.0))).init();
     let mut rng = SplitMix64::new(1);
     let mut times = Vec::new();
     // Mean ms per counted step of: forward PathNet, D_G, D_P (or both-buffers), E (+ recombine),

@@ -64,7 +64,17 @@ mod tests {
         let d = cpu_device();
         vec![
             ("kpcn", KpcnConfig::new(in_channels).with_depth(3).with_width(8).with_conv_kernel(3).with_filter_size(5).init(9, &d)),
-            ("mskp", Column::mskp(MsKpConfig::new(in_channels).with_widths(vec![6, 8, 8]).with_kernel_scales(2).with_filter_size(3).with_margin(2).init(9, &d))),
+            (
+                "mskp",
+                Column::mskp(
+                    MsKpConfig::new(in_channels)
+                        .with_widths(vec![6, 8, 8])
+                        .with_kernel_scales(2)
+                        .with_filter_size(3)
+                        .with_margin(2)
+                        .init(9, &d),
+                ),
+            ),
         ]
     }
 

@@ -26,7 +26,11 @@ pub struct EnsembleConfig {
 
 impl EnsembleConfig {
     pub fn in_channels(&self) -> usize {
-        if self.radiance_only { 6 } else { 6 + G_BLOCK + P_BLOCK }
+        if self.radiance_only {
+            6
+        } else {
+            6 + G_BLOCK + P_BLOCK
+        }
     }
 
     fn widths(&self) -> Vec<usize> {
@@ -103,14 +107,7 @@ impl EnsembleNet {
         self.forward_opts(i_g, i_p, g_block, p_block, true)
     }
 
-    pub(crate) fn forward_opts(
-        &self,
-        i_g: Tensor<4>,
-        i_p: Tensor<4>,
-        g_block: Tensor<4>,
-        p_block: Tensor<4>,
-        detach: bool,
-    ) -> Blend {
+    pub(crate) fn forward_opts(&self, i_g: Tensor<4>, i_p: Tensor<4>, g_block: Tensor<4>, p_block: Tensor<4>, detach: bool) -> Blend {
         let [_, _, h, w] = i_g.dims();
         let (sg, sp) = if detach { (i_g.clone().detach(), i_p.clone().detach()) } else { (i_g.clone(), i_p.clone()) };
         let mut parts = vec![sg, sp];

@@ -68,12 +68,7 @@ pub fn apply_weights(input: Tensor<4>, weights: Tensor<4>) -> Tensor<4> {
 
 /// Slow f64 reference of [`apply_kernel`] on flat NCHW buffers (used by the tests and handy for
 /// checking other implementations). Returns the `[B, C, Ho, Wo]` output.
-pub fn reference_apply_kernel(
-    input: &[f64],
-    [b, c, hi, wi]: [usize; 4],
-    logits: &[f64],
-    [_, taps, ho, wo]: [usize; 4],
-) -> Vec<f64> {
+pub fn reference_apply_kernel(input: &[f64], [b, c, hi, wi]: [usize; 4], logits: &[f64], [_, taps, ho, wo]: [usize; 4]) -> Vec<f64> {
     let k = filter_size(taps);
     let r = (k / 2) as isize;
     let (oy, ox) = (((hi - ho) / 2) as isize, ((wi - wo) / 2) as isize);
@@ -214,11 +209,8 @@ mod tests {
             for y in 0..h as isize {
                 for x in 0..w as isize {
                     let (sy, sx) = (y + dy, x + dx);
-                    let expect = if sy < 0 || sx < 0 || sy >= h as isize || sx >= w as isize {
-                        0.0
-                    } else {
-                        img[(sy * w as isize + sx) as usize]
-                    };
+                    let expect =
+                        if sy < 0 || sx < 0 || sy >= h as isize || sx >= w as isize { 0.0 } else { img[(sy * w as isize + sx) as usize] };
                     assert_eq!(out[(y * w as isize + x) as usize], expect, "tap {tap} at ({y},{x})");
                 }
             }

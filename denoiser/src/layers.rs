@@ -84,9 +84,7 @@ impl Conv {
             Init::TorchDefault => (1.0 / fan_in.sqrt(), 1.0 / fan_in.sqrt()),
         };
         let w: Vec<f32> = (0..n).map(|_| rng.symmetric(w_bound)).collect();
-        let b: Vec<f32> = (0..spec.out_channels)
-            .map(|_| if b_bound > 0.0 { rng.symmetric(b_bound) } else { 0.0 })
-            .collect();
+        let b: Vec<f32> = (0..spec.out_channels).map(|_| if b_bound > 0.0 { rng.symmetric(b_bound) } else { 0.0 }).collect();
         let norm_gain = spec.weight_norm.then(|| {
             let g: Vec<f32> = w
                 .chunks(spec.in_channels * k2)
@@ -123,12 +121,7 @@ impl Conv {
     /// `[B, in, H, W]` → `[B, out, H', W']` with H' = H (same) or H − k + 1 (valid).
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         let p = self.padding;
-        conv2d(
-            x,
-            self.effective_weight(),
-            Some(self.bias.val()),
-            ConvOptions::new([1, 1], [p, p], [1, 1], 1),
-        )
+        conv2d(x, self.effective_weight(), Some(self.bias.val()), ConvOptions::new([1, 1], [p, p], [1, 1], 1))
     }
 
     pub fn out_channels(&self) -> usize {
@@ -228,10 +221,7 @@ mod tests {
     #[test]
     fn sanitize_replaces_non_finite() {
         let d = cpu_device();
-        let x = Tensor::<1>::from_data(
-            TensorData::new(vec![f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e6, -2.0, 0.0], [6]),
-            &d,
-        );
+        let x = Tensor::<1>::from_data(TensorData::new(vec![f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e6, -2.0, 0.0], [6]), &d);
         let y: Vec<f32> = sanitize(x, 100.0).into_data().to_vec::<f32>().unwrap();
         assert_eq!(y, vec![0.0, 100.0, -100.0, 100.0, -2.0, 0.0]);
     }
@@ -239,14 +229,8 @@ mod tests {
     #[test]
     fn weight_norm_starts_at_the_direction() {
         let d = cpu_device();
-        let spec = ConvSpec {
-            in_channels: 3,
-            out_channels: 4,
-            kernel: 3,
-            padding: Padding::Same,
-            init: Init::TorchDefault,
-            weight_norm: true,
-        };
+        let spec =
+            ConvSpec { in_channels: 3, out_channels: 4, kernel: 3, padding: Padding::Same, init: Init::TorchDefault, weight_norm: true };
         let c = Conv::new(spec, 1, 2, &d);
         let v: Vec<f32> = c.weight.val().into_data().to_vec::<f32>().unwrap();
         let w: Vec<f32> = c.effective_weight().into_data().to_vec::<f32>().unwrap();

@@ -132,7 +132,9 @@ impl Backend {
             #[cfg(feature = "tch")]
             Self::TchCuda => Ok(Device::libtorch_cuda(0)),
             #[cfg(not(feature = "tch"))]
-            Self::Tch | Self::TchCuda => Err(not_compiled(self.name(), "tch", "LibTorch from a PyTorch 2.9.0 venv: run tools/install_libtorch.sh")),
+            Self::Tch | Self::TchCuda => {
+                Err(not_compiled(self.name(), "tch", "LibTorch from a PyTorch 2.9.0 venv: run tools/install_libtorch.sh"))
+            }
             #[cfg(feature = "cuda")]
             Self::Cuda => Ok(Device::cuda(0)),
             #[cfg(not(feature = "cuda"))]

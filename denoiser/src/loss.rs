@@ -15,7 +15,9 @@ pub fn l1<const D: usize>(x: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
 /// τ(c) = (max(c, 0)/(1 + lum(c)/1.5) + 1e-3)^(1/2.2).
 pub fn tonemap_eval(c: Tensor<4>) -> Tensor<4> {
     let c = c.clamp_min(0.0);
-    let lum = c.clone().narrow(1, 0, 1).mul_scalar(0.2126) + c.clone().narrow(1, 1, 1).mul_scalar(0.7152) + c.clone().narrow(1, 2, 1).mul_scalar(0.0722);
+    let lum = c.clone().narrow(1, 0, 1).mul_scalar(0.2126)
+        + c.clone().narrow(1, 1, 1).mul_scalar(0.7152)
+        + c.clone().narrow(1, 2, 1).mul_scalar(0.0722);
     (c / lum.div_scalar(1.5).add_scalar(1.0)).add_scalar(1e-3).powf_scalar(1.0 / 2.2)
 }
 
@@ -39,7 +41,9 @@ pub fn rel_mse_val<const D: usize>(x: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
 pub fn rel_mse_test(x: Tensor<4>, y: Tensor<4>) -> Tensor<1> {
     let tm = |c: Tensor<4>| {
         let c = c.clamp_min(0.0);
-        let lum = c.clone().narrow(1, 0, 1).mul_scalar(0.2126) + c.clone().narrow(1, 1, 1).mul_scalar(0.7152) + c.clone().narrow(1, 2, 1).mul_scalar(0.0722);
+        let lum = c.clone().narrow(1, 0, 1).mul_scalar(0.2126)
+            + c.clone().narrow(1, 1, 1).mul_scalar(0.7152)
+            + c.clone().narrow(1, 2, 1).mul_scalar(0.0722);
         (c / lum.div_scalar(1.5).add_scalar(1.0)).powf_scalar(1.0 / 2.2).clamp(0.0, 1.0)
     };
     let (x, y) = (tm(x), tm(y));
@@ -127,7 +131,8 @@ mod tests {
         let (w, h) = (4usize, 3usize);
         let mut rng = crate::rng::SplitMix64::new(5);
         let y: Vec<f32> = (0..3 * w * h).map(|i| if i % 7 == 0 { 0.0 } else { 2.0 + 2.0 * rng.symmetric(1.0) }).collect();
-        let x: Vec<f32> = y.iter().enumerate().map(|(i, v)| if i % 5 == 0 { -0.3 } else { v * (1.0 + 0.5 * rng.symmetric(1.0)) + 0.01 }).collect();
+        let x: Vec<f32> =
+            y.iter().enumerate().map(|(i, v)| if i % 5 == 0 { -0.3 } else { v * (1.0 + 0.5 * rng.symmetric(1.0)) + 0.01 }).collect();
         let planar = |v: &[f32]| -> Vec<f64> { (0..3).flat_map(|c| (0..w * h).map(move |p| v[3 * p + c] as f64)).collect() };
         let t = |v: &[f32]| tensor(&planar(v), [1, 3, h, w], &d);
         let got = scalar(rel_mse_test(t(&x), t(&y)));

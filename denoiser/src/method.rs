@@ -10,14 +10,14 @@ use std::time::Instant;
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 
+use crate::column::Column;
 use crate::ensemble::{Blend, EnsembleNet};
 use crate::kpcn::channels::G_ALBEDO;
-use crate::column::Column;
 use crate::kpcn::{recombine, Variant};
+use crate::model::BranchInput;
 use crate::model::DenoiserConfig;
 use crate::pathnet::{PathNet, PathOutput};
 use crate::preprocess::InputTensors;
-use crate::model::BranchInput;
 
 /// Which auxiliary features a model uses and how.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -129,7 +129,13 @@ impl BranchNets {
     /// backend executes eagerly, so the time around a call is that network's). `pbuf`: the
     /// P-buffer `[B, 13, H, W]` if already computed (inference computes it for the whole image
     /// first); then the PathNet is not run and the result carries no [`PathOutput`].
-    pub fn forward_timed(&self, input: BranchInput, path_weight: Tensor<4>, pbuf: Option<Tensor<4>>, lap: &mut dyn FnMut(Part, f64)) -> BranchResult {
+    pub fn forward_timed(
+        &self,
+        input: BranchInput,
+        path_weight: Tensor<4>,
+        pbuf: Option<Tensor<4>>,
+        lap: &mut dyn FnMut(Part, f64),
+    ) -> BranchResult {
         let (path, pbuf) = match (pbuf, &self.path) {
             (Some(pb), Some(_)) => (None, Some(pb)),
             (_, Some(net)) => {
@@ -139,7 +145,10 @@ impl BranchNets {
             }
             (_, None) => (None, None),
         };
-        let i_g = self.d_g.as_ref().map(|d| timed(lap, Part::DG, || d.forward(Tensor::cat(vec![input.colour.clone(), input.g_block.clone()], 1), input.spp)));
+        let i_g = self
+            .d_g
+            .as_ref()
+            .map(|d| timed(lap, Part::DG, || d.forward(Tensor::cat(vec![input.colour.clone(), input.g_block.clone()], 1), input.spp)));
         let i_p = self.d_p.as_ref().map(|d| {
             let pb = pbuf.clone().expect("D_P needs a PathNet");
             timed(lap, Part::DP, || d.forward(Tensor::cat(vec![input.colour.clone(), pb], 1), input.spp))

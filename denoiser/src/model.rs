@@ -63,11 +63,7 @@ impl DenoiserConfig {
     pub fn kpcn_cpu() -> Self {
         Self::new(
             KpcnConfig::new(Variant::G.in_channels()).with_depth(7).with_width(48).with_conv_kernel(3).with_filter_size(13),
-            PathNetConfig::new()
-                .with_embed_width(32)
-                .with_unet_widths(vec![32, 48, 64])
-                .with_convs_per_block(2)
-                .with_out_hidden(32),
+            PathNetConfig::new().with_embed_width(32).with_unet_widths(vec![32, 48, 64]).with_convs_per_block(2).with_out_hidden(32),
             EnsembleConfig::new().with_depth(5).with_width(24).with_conv_kernel(3),
         )
     }
@@ -80,11 +76,7 @@ impl DenoiserConfig {
     pub fn cpu_default() -> Self {
         Self::new(
             Self::kpcn_cpu().kpcn,
-            PathNetConfig::new()
-                .with_embed_width(24)
-                .with_unet_widths(vec![16, 24, 32])
-                .with_convs_per_block(2)
-                .with_out_hidden(24),
+            PathNetConfig::new().with_embed_width(24).with_unet_widths(vec![16, 24, 32]).with_convs_per_block(2).with_out_hidden(24),
             EnsembleConfig::new().with_depth(5).with_width(16).with_conv_kernel(3),
         )
         .with_mskp(Some(MsKpConfig::new(Variant::G.in_channels())))
@@ -171,7 +163,10 @@ fn edge_guides(v: Variant, stopping: EdgeStopping, diffuse: bool) -> Vec<GuideGr
         // mskp::pooled_variance). The pooled one starts at e^−3, where a jump of 3σ in every
         // channel keeps ~30 % of a tap's weight and one of 10σ none, so it acts from the first
         // step; the own one at e^−5, to be raised where the network finds it reliable.
-        EdgeStopping::FeaturesAndNoisyColour | EdgeStopping::FeaturesAndTwoSidedNoisyColour | EdgeStopping::FeaturesAndFadingTwoSidedNoisyColour | EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack => {
+        EdgeStopping::FeaturesAndNoisyColour
+        | EdgeStopping::FeaturesAndTwoSidedNoisyColour
+        | EdgeStopping::FeaturesAndFadingTwoSidedNoisyColour
+        | EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack => {
             let mut own = GuideGroup::new(0, 3, 1.0, false).with_variance(3).with_init_log_strength(-5.0);
             let mut pooled = GuideGroup::new(0, 3, 1.0, false).with_pooled_variance(3).with_init_log_strength(-3.0);
             match stopping {
@@ -181,8 +176,12 @@ fn edge_guides(v: Variant, stopping: EdgeStopping, diffuse: bool) -> Vec<GuideGr
                 // specular light is mostly a surface without a specular lobe, a fact at any
                 // sample count (the brick wall beside wire-fence's glinting wires: doubting it
                 // there took g from 0.0063 to 0.0077 at 32 spp, docs/denoiser.md).
-                EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack if diffuse => (own, pooled) = (own.two_sided_fading_doubting_black(), pooled.two_sided_fading_doubting_black()),
-                EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack => (own, pooled) = (own.two_sided_fading(), pooled.two_sided_fading()),
+                EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack if diffuse => {
+                    (own, pooled) = (own.two_sided_fading_doubting_black(), pooled.two_sided_fading_doubting_black())
+                }
+                EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack => {
+                    (own, pooled) = (own.two_sided_fading(), pooled.two_sided_fading())
+                }
                 _ => {}
             }
             return [own, pooled].into_iter().chain(edge_guides(v, EdgeStopping::Features, diffuse)).collect();
@@ -190,7 +189,8 @@ fn edge_guides(v: Variant, stopping: EdgeStopping, diffuse: bool) -> Vec<GuideGr
         EdgeStopping::Features | EdgeStopping::Off => None,
     };
     let g = COLOUR_BLOCK;
-    let g_block = vec![GuideGroup::new(g, 3, 1.0, false), GuideGroup::new(g + 10, 1, 20.0, false), GuideGroup::new(g + G_ALBEDO, 3, 1.0, false)];
+    let g_block =
+        vec![GuideGroup::new(g, 3, 1.0, false), GuideGroup::new(g + 10, 1, 20.0, false), GuideGroup::new(g + G_ALBEDO, 3, 1.0, false)];
     let f_p = |at: usize| vec![GuideGroup::new(at, P_FEATURES, 1.0, false)];
     let features = match v {
         Variant::G => g_block,
@@ -354,7 +354,9 @@ mod tests {
                 (_, Some(u)) => v.extend(to_vec(u.heads[0].weight.val())),
                 _ => unreachable!(),
             }
-            v.extend(to_vec(p.net.as_ref().map_or_else(|| p.unet.as_ref().unwrap().down[0].layers[1].weight.val(), |n| n.layers[1].weight.val())));
+            v.extend(to_vec(
+                p.net.as_ref().map_or_else(|| p.unet.as_ref().unwrap().down[0].layers[1].weight.val(), |n| n.layers[1].weight.val()),
+            ));
             let path = br.path.as_ref().unwrap();
             v.extend(to_vec(path.head.layers[0].weight.val()));
             v.extend(to_vec(path.head.layers[0].bias.val()));
@@ -397,7 +399,10 @@ mod tests {
         }
         assert!(cpu.macs_per_pixel(8) < paper_half.macs_per_pixel(8));
         assert_eq!((paper_half.kpcn.width, paper_half.pathnet.embed_width, paper_half.ensemble.width), (50, 32, 25));
-        assert_eq!((half.kpcn.width, half.pathnet.unet_widths.clone(), half.pathnet.out_hidden, half.ensemble.width), (24, vec![16, 24, 32], 16, 12));
+        assert_eq!(
+            (half.kpcn.width, half.pathnet.unet_widths.clone(), half.pathnet.out_hidden, half.ensemble.width),
+            (24, vec![16, 24, 32], 16, 12)
+        );
         let (default, default_half) = (DenoiserConfig::cpu_default(), DenoiserConfig::half());
         assert_eq!(default_half.mskp.as_ref().map(|m| m.widths.clone()), Some(vec![12, 16, 24, 32, 40]));
         let (b, s) = (default.macs_per_pixel(8) as f64, default_half.macs_per_pixel(8) as f64);

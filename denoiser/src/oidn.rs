@@ -26,36 +26,16 @@ pub enum OidnError {
     #[error("{path}: cannot load Open Image Denoise: {message}")]
     Load { path: PathBuf, message: String },
     #[error("{path}: no function {symbol} (not an OIDN 2.x library?): {message}")]
-    Symbol {
-        path: PathBuf,
-        symbol: &'static str,
-        message: String,
-    },
+    Symbol { path: PathBuf, symbol: &'static str, message: String },
     #[error("{path}: OIDN version {version}, but version 2.x is needed")]
     Version { path: PathBuf, version: String },
     /// An OIDN call reported an error (`oidnGetDeviceError`).
     #[error("OIDN {stage}: {message} (OIDN error code {code})")]
-    Call {
-        stage: &'static str,
-        code: i32,
-        message: String,
-    },
-    #[error(
-        "OIDN input {name}: {got} values, but {width}×{height} pixels × 3 channels need {want}"
-    )]
-    Size {
-        name: &'static str,
-        got: usize,
-        want: usize,
-        width: usize,
-        height: usize,
-    },
+    Call { stage: &'static str, code: i32, message: String },
+    #[error("OIDN input {name}: {got} values, but {width}×{height} pixels × 3 channels need {want}")]
+    Size { name: &'static str, got: usize, want: usize, width: usize, height: usize },
     #[error("OIDN input {name}: non-finite value at pixel ({x}, {y})")]
-    NonFinite {
-        name: &'static str,
-        x: usize,
-        y: usize,
-    },
+    NonFinite { name: &'static str, x: usize, y: usize },
     #[error("OIDN input: empty image ({width}×{height})")]
     Empty { width: usize, height: usize },
 }
@@ -69,17 +49,7 @@ struct Api {
     release_device: unsafe extern "C" fn(Device),
     get_device_error: unsafe extern "C" fn(Device, *mut *const c_char) -> c_int,
     new_filter: unsafe extern "C" fn(Device, *const c_char) -> Filter,
-    set_shared_filter_image: unsafe extern "C" fn(
-        Filter,
-        *const c_char,
-        *mut c_void,
-        c_int,
-        usize,
-        usize,
-        usize,
-        usize,
-        usize,
-    ),
+    set_shared_filter_image: unsafe extern "C" fn(Filter, *const c_char, *mut c_void, c_int, usize, usize, usize, usize, usize),
     set_filter_bool: unsafe extern "C" fn(Filter, *const c_char, bool),
     set_filter_int: unsafe extern "C" fn(Filter, *const c_char, c_int),
     commit_filter: unsafe extern "C" fn(Filter),
@@ -106,10 +76,7 @@ impl Oidn {
     pub fn load(lib_dir: &Path, threads: usize) -> Result<Oidn, OidnError> {
         let path = lib_dir.join(LIBRARY);
         // SAFETY: loading runs the library's initialisers; OIDN's have no preconditions.
-        let lib = unsafe { libloading::Library::new(&path) }.map_err(|e| OidnError::Load {
-            path: path.clone(),
-            message: e.to_string(),
-        })?;
+        let lib = unsafe { libloading::Library::new(&path) }.map_err(|e| OidnError::Load { path: path.clone(), message: e.to_string() })?;
         let api = Api {
             new_device: sym(&lib, &path, "oidnNewDevice")?,
             set_device_int: sym(&lib, &path, "oidnSetDeviceInt")?,
@@ -132,26 +99,11 @@ impl Oidn {
             let device = (api.new_device)(DEVICE_TYPE_CPU);
             if device.is_null() {
                 let (code, message) = error(&api, std::ptr::null_mut());
-                return Err(OidnError::Call {
-                    stage: "creating the CPU device",
-                    code,
-                    message,
-                });
+                return Err(OidnError::Call { stage: "creating the CPU device", code, message });
             }
-            let mut oidn = Oidn {
-                api,
-                device,
-                version: String::new(),
-                threads,
-                path,
-                _lib: lib,
-            };
+            let mut oidn = Oidn { api, device, version: String::new(), threads, path, _lib: lib };
             if threads > 0 {
-                (oidn.api.set_device_int)(
-                    device,
-                    c"numThreads".as_ptr(),
-                    threads.min(c_int::MAX as usize) as c_int,
-                );
+                (oidn.api.set_device_int)(device, c"numThreads".as_ptr(), threads.min(c_int::MAX as usize) as c_int);
             }
             (oidn.api.commit_device)(device);
             oidn.check("committing the CPU device")?;
@@ -160,10 +112,7 @@ impl Oidn {
             oidn.check("reading the version")?;
             oidn.version = format!("{}.{}.{}", v / 10000, v / 100 % 100, v % 100);
             if v / 10000 != 2 {
-                return Err(OidnError::Version {
-                    path: oidn.path.clone(),
-                    version: oidn.version.clone(),
-                });
+                return Err(OidnError::Version { path: oidn.path.clone(), version: oidn.version.clone() });
             }
             Ok(oidn)
         }
@@ -188,19 +137,8 @@ impl Oidn {
     /// G-buffers, all interleaved RGB `[H, W, 3]` like `Frame`'s buffers. Returns the denoised
     /// radiance in the same layout. Every call builds and commits a new filter (OIDN's RT filter,
     /// `hdr`, quality high) and executes it once: that pair is the per-frame cost.
-    pub fn denoise(
-        &self,
-        colour: &[f32],
-        albedo: &[f32],
-        normal: &[f32],
-        width: usize,
-        height: usize,
-    ) -> Result<Vec<f32>, OidnError> {
-        check_inputs(
-            &[("colour", colour), ("albedo", albedo), ("normal", normal)],
-            width,
-            height,
-        )?;
+    pub fn denoise(&self, colour: &[f32], albedo: &[f32], normal: &[f32], width: usize, height: usize) -> Result<Vec<f32>, OidnError> {
+        check_inputs(&[("colour", colour), ("albedo", albedo), ("normal", normal)], width, height)?;
         let mut output = vec![0.0f32; width * height * 3];
         // SAFETY: the filter handle is checked for null and released by the guard; the images
         // are `width × height` FLOAT3 (checked above) and outlive the filter, which only reads
@@ -209,16 +147,9 @@ impl Oidn {
             let filter = (self.api.new_filter)(self.device, c"RT".as_ptr());
             if filter.is_null() {
                 let (code, message) = error(&self.api, self.device);
-                return Err(OidnError::Call {
-                    stage: "creating the RT filter",
-                    code,
-                    message,
-                });
+                return Err(OidnError::Call { stage: "creating the RT filter", code, message });
             }
-            let _release = FilterGuard {
-                filter,
-                release: self.api.release_filter,
-            };
+            let _release = FilterGuard { filter, release: self.api.release_filter };
             let images: [(&CStr, *mut c_void); 4] = [
                 (c"color", colour.as_ptr() as *mut c_void),
                 (c"albedo", albedo.as_ptr() as *mut c_void),
@@ -226,17 +157,7 @@ impl Oidn {
                 (c"output", output.as_mut_ptr() as *mut c_void),
             ];
             for (name, ptr) in images {
-                (self.api.set_shared_filter_image)(
-                    filter,
-                    name.as_ptr(),
-                    ptr,
-                    FORMAT_FLOAT3,
-                    width,
-                    height,
-                    0,
-                    0,
-                    0,
-                );
+                (self.api.set_shared_filter_image)(filter, name.as_ptr(), ptr, FORMAT_FLOAT3, width, height, 0, 0, 0);
             }
             (self.api.set_filter_bool)(filter, c"hdr".as_ptr(), true);
             (self.api.set_filter_int)(filter, c"quality".as_ptr(), QUALITY_HIGH);
@@ -256,11 +177,7 @@ impl Oidn {
         if code == 0 {
             Ok(())
         } else {
-            Err(OidnError::Call {
-                stage,
-                code,
-                message,
-            })
+            Err(OidnError::Call { stage, code, message })
         }
     }
 }
@@ -285,20 +202,14 @@ impl Drop for FilterGuard {
 }
 
 /// The function `name` of `lib`, as the function pointer type `T`.
-fn sym<T: Copy>(
-    lib: &libloading::Library,
-    path: &Path,
-    name: &'static str,
-) -> Result<T, OidnError> {
+fn sym<T: Copy>(lib: &libloading::Library, path: &Path, name: &'static str) -> Result<T, OidnError> {
     // SAFETY: every `T` asked for is the function's C signature in oidn.h (OIDN 2.5); the pointer
     // stays valid because the library is never unloaded.
-    unsafe { lib.get::<T>(name.as_bytes()) }
-        .map(|s| *s)
-        .map_err(|e| OidnError::Symbol {
-            path: path.to_path_buf(),
-            symbol: name,
-            message: e.to_string(),
-        })
+    unsafe { lib.get::<T>(name.as_bytes()) }.map(|s| *s).map_err(|e| OidnError::Symbol {
+        path: path.to_path_buf(),
+        symbol: name,
+        message: e.to_string(),
+    })
 }
 
 /// `oidnGetDeviceError` of `device` (null: the error of a failed device creation).
@@ -308,47 +219,24 @@ fn sym<T: Copy>(
 unsafe fn error(api: &Api, device: Device) -> (i32, String) {
     let mut msg: *const c_char = std::ptr::null();
     let code = unsafe { (api.get_device_error)(device, &mut msg) };
-    let message = if msg.is_null() {
-        "no message".to_string()
-    } else {
-        unsafe { CStr::from_ptr(msg) }
-            .to_string_lossy()
-            .into_owned()
-    };
+    let message = if msg.is_null() { "no message".to_string() } else { unsafe { CStr::from_ptr(msg) }.to_string_lossy().into_owned() };
     (code, message)
 }
 
 /// Sizes and finiteness of the inputs: OIDN reads exactly `width × height × 3` floats of each,
 /// and a NaN or infinity would spread over the whole neighbourhood it filters.
-fn check_inputs(
-    inputs: &[(&'static str, &[f32])],
-    width: usize,
-    height: usize,
-) -> Result<(), OidnError> {
+fn check_inputs(inputs: &[(&'static str, &[f32])], width: usize, height: usize) -> Result<(), OidnError> {
     if width == 0 || height == 0 {
         return Err(OidnError::Empty { width, height });
     }
-    let want = width
-        .checked_mul(height)
-        .and_then(|n| n.checked_mul(3))
-        .ok_or(OidnError::Empty { width, height })?;
+    let want = width.checked_mul(height).and_then(|n| n.checked_mul(3)).ok_or(OidnError::Empty { width, height })?;
     for &(name, v) in inputs {
         if v.len() != want {
-            return Err(OidnError::Size {
-                name,
-                got: v.len(),
-                want,
-                width,
-                height,
-            });
+            return Err(OidnError::Size { name, got: v.len(), want, width, height });
         }
         if let Some(i) = v.iter().position(|x| !x.is_finite()) {
             let p = i / 3;
-            return Err(OidnError::NonFinite {
-                name,
-                x: p % width,
-                y: p / width,
-            });
+            return Err(OidnError::NonFinite { name, x: p % width, y: p / width });
         }
     }
     Ok(())
@@ -364,36 +252,12 @@ mod tests {
         assert!(check_inputs(&[("colour", &ok), ("albedo", &ok)], 4, 3).is_ok());
         let short = vec![0.5f32; 4 * 3 * 3 - 1];
         let e = check_inputs(&[("colour", &ok), ("albedo", &short)], 4, 3).unwrap_err();
-        assert!(
-            matches!(
-                e,
-                OidnError::Size {
-                    name: "albedo",
-                    got: 35,
-                    want: 36,
-                    ..
-                }
-            ),
-            "{e}"
-        );
+        assert!(matches!(e, OidnError::Size { name: "albedo", got: 35, want: 36, .. }), "{e}");
         let mut nan = ok.clone();
         nan[(2 * 4 + 1) * 3 + 2] = f32::NAN;
         let e = check_inputs(&[("normal", &nan)], 4, 3).unwrap_err();
-        assert!(
-            matches!(
-                e,
-                OidnError::NonFinite {
-                    name: "normal",
-                    x: 1,
-                    y: 2
-                }
-            ),
-            "{e}"
-        );
-        assert!(matches!(
-            check_inputs(&[("colour", &[])], 0, 3),
-            Err(OidnError::Empty { .. })
-        ));
+        assert!(matches!(e, OidnError::NonFinite { name: "normal", x: 1, y: 2 }), "{e}");
+        assert!(matches!(check_inputs(&[("colour", &[])], 0, 3), Err(OidnError::Empty { .. })));
     }
 
     #[test]

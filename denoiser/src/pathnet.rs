@@ -51,9 +51,7 @@ impl PathNetConfig {
         per_sample += conv_macs(e + self.unet_widths[0], self.out_hidden, 1);
         per_sample += conv_macs(self.out_hidden, self.out_channels, 1);
         let k = self.unet_kernel;
-        let block = |cin: usize, cout: usize| {
-            conv_macs(cin, cout, k) + (self.convs_per_block as u64 - 1) * conv_macs(cout, cout, k)
-        };
+        let block = |cin: usize, cout: usize| conv_macs(cin, cout, k) + (self.convs_per_block as u64 - 1) * conv_macs(cout, cout, k);
         let w = &self.unet_widths;
         let mut unet = 0.0;
         for l in 0..w.len() {
@@ -105,7 +103,9 @@ impl PathNetConfig {
             })
             .collect();
         let up = (0..w.len() - 1)
-            .map(|l| ConvStack::new(&block_widths(w[l + 1] + w[l], w[l]), k, Padding::Same, init, init, wn, relu, seed, 20 + l as u64, device))
+            .map(|l| {
+                ConvStack::new(&block_widths(w[l + 1] + w[l], w[l]), k, Padding::Same, init, init, wn, relu, seed, 20 + l as u64, device)
+            })
             .collect();
         PathNet {
             embed: ConvStack::new(&embed_w, 1, Padding::Valid, init, init, wn, relu, seed, 1, device),
@@ -190,10 +190,7 @@ impl PathNet {
         for l in (0..self.up.len()).rev() {
             let skip = skips.pop().expect("one skip per level");
             let [_, _, h, w] = skip.dims();
-            let up = interpolate(
-                x,
-                InterpolateOptions::new(InterpolateMode::Bilinear).with_align_corners(false).with_output_size([h, w]),
-            );
+            let up = interpolate(x, InterpolateOptions::new(InterpolateMode::Bilinear).with_align_corners(false).with_output_size([h, w]));
             x = self.up[l].forward(Tensor::cat(vec![up, skip], 1));
             x = if l == 0 { Activation::LeakyRelu(0.01).apply(x) } else { relu.apply(x) };
         }

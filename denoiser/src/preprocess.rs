@@ -24,30 +24,11 @@ pub enum PrepareError {
     #[error("the frame has no per-sample path descriptors, which P-buffer models need")]
     MissingDescriptors,
     #[error("descriptors are {dw}×{dh} at {ds} spp but the frame is {fw}×{fh} at {fs} spp")]
-    DescriptorShape {
-        dw: u32,
-        dh: u32,
-        ds: u32,
-        fw: u32,
-        fh: u32,
-        fs: u32,
-    },
+    DescriptorShape { dw: u32, dh: u32, ds: u32, fw: u32, fh: u32, fs: u32 },
     #[error("crop {x},{y} {w}×{h} is outside the {width}×{height} image")]
-    Crop {
-        x: usize,
-        y: usize,
-        w: usize,
-        h: usize,
-        width: usize,
-        height: usize,
-    },
+    Crop { x: usize, y: usize, w: usize, h: usize, width: usize, height: usize },
     #[error("reference is {rw}×{rh} but the input is {w}×{h}")]
-    Size {
-        rw: usize,
-        rh: usize,
-        w: usize,
-        h: usize,
-    },
+    Size { rw: usize, rh: usize, w: usize, h: usize },
 }
 
 /// The preprocessed inputs of one image (or one crop of it). All planar `[C, H, W]`, row-major.
@@ -114,10 +95,7 @@ fn finite(x: f32) -> f32 {
     }
 }
 
-fn need<'a>(
-    b: &'a Option<PixelBuffer>,
-    name: &'static str,
-) -> Result<&'a PixelBuffer, PrepareError> {
+fn need<'a>(b: &'a Option<PixelBuffer>, name: &'static str) -> Result<&'a PixelBuffer, PrepareError> {
     b.as_ref().ok_or(PrepareError::MissingBuffer(name))
 }
 
@@ -203,40 +181,25 @@ fn prepare_blocks(frame: &Frame) -> Result<PreparedImage, PrepareError> {
 
     // Diffuse block: demodulated colour and its variance, as method.md §2 step 2.
     let mut dblock = Vec::with_capacity(COLOUR_BLOCK * n);
-    push_planes(&mut dblock, n, 3, |i, c| {
-        diff.mean[3 * i + c].max(0.0) / (alb.mean[3 * i + c] + ALBEDO_EPS)
-    });
+    push_planes(&mut dblock, n, 3, |i, c| diff.mean[3 * i + c].max(0.0) / (alb.mean[3 * i + c] + ALBEDO_EPS));
     push_planes(&mut dblock, n, 1, |i, _| {
-        let a2 = (0..3)
-            .map(|c| (alb.mean[3 * i + c] + ALBEDO_EPS).powi(2))
-            .sum::<f32>()
-            / 3.0;
+        let a2 = (0..3).map(|c| (alb.mean[3 * i + c] + ALBEDO_EPS).powi(2)).sum::<f32>() / 3.0;
         mean3(&dv, i) / a2
     });
     push_gradients(&mut dblock, 0, 3, w, h);
 
     // Specular block: log colour; variance through the derivative of the log (step 3).
     let mut sblock = Vec::with_capacity(COLOUR_BLOCK * n);
-    push_planes(&mut sblock, n, 3, |i, c| {
-        spec.mean[3 * i + c].max(0.0).ln_1p()
-    });
+    push_planes(&mut sblock, n, 3, |i, c| spec.mean[3 * i + c].max(0.0).ln_1p());
     push_planes(&mut sblock, n, 1, |i, _| {
-        let d2 = (0..3)
-            .map(|c| (1.0 + spec.mean[3 * i + c].max(0.0)).powi(2))
-            .sum::<f32>()
-            / 3.0;
+        let d2 = (0..3).map(|c| (1.0 + spec.mean[3 * i + c].max(0.0)).powi(2)).sum::<f32>() / 3.0;
         mean3(&sv, i) / d2
     });
     push_gradients(&mut sblock, 0, 3, w, h);
 
     // G block. Depth is normalised by the image maximum (step 5), so a crop must be cut from
     // the prepared full image, never prepared on its own.
-    let zmax = dep
-        .mean
-        .iter()
-        .copied()
-        .filter(|z| z.is_finite())
-        .fold(0.0f32, f32::max);
+    let zmax = dep.mean.iter().copied().filter(|z| z.is_finite()).fold(0.0f32, f32::max);
     let zs = if zmax > 0.0 { 1.0 / zmax } else { 0.0 };
     let mut g = Vec::with_capacity(G_BLOCK * n);
     push_planes(&mut g, n, 3, |i, c| nrm.mean[3 * i + c]);
@@ -271,8 +234,7 @@ fn prepare_blocks(frame: &Frame) -> Result<PreparedImage, PrepareError> {
             for i in 0..n {
                 for k in 0..s {
                     let rec = &d.data[(i * ds + k) * FIELDS..(i * ds + k + 1) * FIELDS];
-                    pw[i] +=
-                        finite((rec[field::PATH_WEIGHT].max(0.0) + 1e-6).ln() / 90.0) / s as f32;
+                    pw[i] += finite((rec[field::PATH_WEIGHT].max(0.0) + 1e-6).ln() / 90.0) / s as f32;
                     // A camera ray that continued off a non-emitting surface has a bounce type.
                     if rec[field::BOUNCE_TYPE] != 0.0 {
                         pass[i] = false;
@@ -317,33 +279,14 @@ pub fn prepare_target(reference: &Frame) -> Result<PreparedTarget, PrepareError>
     let mut diffuse = Vec::with_capacity(3 * n);
     let mut specular = Vec::with_capacity(3 * n);
     let mut total = Vec::with_capacity(3 * n);
-    push_planes(&mut diffuse, n, 3, |i, c| {
-        diff.mean[3 * i + c].max(0.0) / (alb.mean[3 * i + c] + ALBEDO_EPS)
-    });
-    push_planes(&mut specular, n, 3, |i, c| {
-        (t[3 * i + c] - diff.mean[3 * i + c]).max(0.0).ln_1p()
-    });
+    push_planes(&mut diffuse, n, 3, |i, c| diff.mean[3 * i + c].max(0.0) / (alb.mean[3 * i + c] + ALBEDO_EPS));
+    push_planes(&mut specular, n, 3, |i, c| (t[3 * i + c] - diff.mean[3 * i + c]).max(0.0).ln_1p());
     push_planes(&mut total, n, 3, |i, c| t[3 * i + c].max(0.0));
-    Ok(PreparedTarget {
-        width: reference.width as usize,
-        height: reference.height as usize,
-        diffuse,
-        specular,
-        total,
-    })
+    Ok(PreparedTarget { width: reference.width as usize, height: reference.height as usize, diffuse, specular, total })
 }
 
 /// Copies the `w × h` window at (x, y) of every plane of a planar buffer with `planes` planes.
-fn crop_planes(
-    src: &[f32],
-    planes: usize,
-    width: usize,
-    height: usize,
-    x: usize,
-    y: usize,
-    w: usize,
-    h: usize,
-) -> Vec<f32> {
+fn crop_planes(src: &[f32], planes: usize, width: usize, height: usize, x: usize, y: usize, w: usize, h: usize) -> Vec<f32> {
     let n = width * height;
     let mut out = Vec::with_capacity(planes * w * h);
     for p in 0..planes {
@@ -355,23 +298,9 @@ fn crop_planes(
     out
 }
 
-fn check_crop(
-    x: usize,
-    y: usize,
-    w: usize,
-    h: usize,
-    width: usize,
-    height: usize,
-) -> Result<(), PrepareError> {
+fn check_crop(x: usize, y: usize, w: usize, h: usize, width: usize, height: usize) -> Result<(), PrepareError> {
     if w == 0 || h == 0 || x + w > width || y + h > height {
-        return Err(PrepareError::Crop {
-            x,
-            y,
-            w,
-            h,
-            width,
-            height,
-        });
+        return Err(PrepareError::Crop { x, y, w, h, width, height });
     }
     Ok(())
 }
@@ -383,25 +312,13 @@ fn stack_planes<T>(crops: &[&T], field: &dyn Fn(&T) -> &[f32], dims: [usize; 4],
 }
 
 impl PreparedImage {
-    pub fn crop(
-        &self,
-        x: usize,
-        y: usize,
-        w: usize,
-        h: usize,
-    ) -> Result<PreparedImage, PrepareError> {
+    pub fn crop(&self, x: usize, y: usize, w: usize, h: usize) -> Result<PreparedImage, PrepareError> {
         check_crop(x, y, w, h, self.width, self.height)?;
         let c = |src: &[f32], planes| crop_planes(src, planes, self.width, self.height, x, y, w, h);
         let passthrough = if self.passthrough.is_empty() {
             Vec::new()
         } else {
-            (y..y + h)
-                .flat_map(|r| {
-                    self.passthrough[r * self.width + x..r * self.width + x + w]
-                        .iter()
-                        .copied()
-                })
-                .collect()
+            (y..y + h).flat_map(|r| self.passthrough[r * self.width + x..r * self.width + x + w].iter().copied()).collect()
         };
         Ok(PreparedImage {
             width: w,
@@ -448,24 +365,13 @@ impl PreparedImage {
     pub fn to_tensors(crops: &[&PreparedImage], device: &Device) -> InputTensors {
         assert!(!crops.is_empty(), "empty batch");
         let (w, h, s) = (crops[0].width, crops[0].height, crops[0].spp);
-        assert!(
-            crops
-                .iter()
-                .all(|c| c.width == w && c.height == h && c.spp == s),
-            "crops of a batch must agree in size and spp"
-        );
+        assert!(crops.iter().all(|c| c.width == w && c.height == h && c.spp == s), "crops of a batch must agree in size and spp");
         let b = crops.len();
         let stack = |f: &dyn Fn(&PreparedImage) -> &[f32], ch: usize| stack_planes(crops, f, [b, ch, h, w], device);
         let g_block = stack(&|c| &c.g_block, G_BLOCK);
         let descriptors: Tensor<5> = if crops.iter().all(|c| c.descriptors.is_some()) {
-            let data: Vec<f32> = crops
-                .iter()
-                .flat_map(|c| c.descriptors.as_ref().unwrap().iter().copied())
-                .collect();
-            Tensor::from_data(
-                TensorData::new(data, [b, s, DESCRIPTOR_CHANNELS, h, w]),
-                device,
-            )
+            let data: Vec<f32> = crops.iter().flat_map(|c| c.descriptors.as_ref().unwrap().iter().copied()).collect();
+            Tensor::from_data(TensorData::new(data, [b, s, DESCRIPTOR_CHANNELS, h, w]), device)
         } else {
             Tensor::zeros([b, 1, DESCRIPTOR_CHANNELS, h, w], device)
         };
@@ -476,50 +382,26 @@ impl PreparedImage {
                 descriptors: descriptors.clone(),
                 spp: s,
             },
-            specular: BranchInput {
-                colour: stack(&|c| &c.specular, COLOUR_BLOCK),
-                g_block,
-                descriptors,
-                spp: s,
-            },
+            specular: BranchInput { colour: stack(&|c| &c.specular, COLOUR_BLOCK), g_block, descriptors, spp: s },
             path_weight: stack(&|c| &c.path_weight, 1),
         }
     }
 }
 
 impl PreparedTarget {
-    pub fn crop(
-        &self,
-        x: usize,
-        y: usize,
-        w: usize,
-        h: usize,
-    ) -> Result<PreparedTarget, PrepareError> {
+    pub fn crop(&self, x: usize, y: usize, w: usize, h: usize) -> Result<PreparedTarget, PrepareError> {
         check_crop(x, y, w, h, self.width, self.height)?;
         let c = |src: &[f32]| crop_planes(src, 3, self.width, self.height, x, y, w, h);
-        Ok(PreparedTarget {
-            width: w,
-            height: h,
-            diffuse: c(&self.diffuse),
-            specular: c(&self.specular),
-            total: c(&self.total),
-        })
+        Ok(PreparedTarget { width: w, height: h, diffuse: c(&self.diffuse), specular: c(&self.specular), total: c(&self.total) })
     }
 
     pub fn to_tensors(crops: &[&PreparedTarget], device: &Device) -> TargetTensors {
         assert!(!crops.is_empty(), "empty batch");
         let (w, h) = (crops[0].width, crops[0].height);
-        assert!(
-            crops.iter().all(|c| c.width == w && c.height == h),
-            "crops of a batch must agree in size"
-        );
+        assert!(crops.iter().all(|c| c.width == w && c.height == h), "crops of a batch must agree in size");
         let b = crops.len();
         let stack = |f: &dyn Fn(&PreparedTarget) -> &[f32]| stack_planes(crops, f, [b, 3, h, w], device);
-        TargetTensors {
-            diffuse: stack(&|c| &c.diffuse),
-            specular: stack(&|c| &c.specular),
-            total: stack(&|c| &c.total),
-        }
+        TargetTensors { diffuse: stack(&|c| &c.diffuse), specular: stack(&|c| &c.specular), total: stack(&|c| &c.total) }
     }
 }
 

@@ -16,9 +16,9 @@ use burn::tensor::{DType, Device};
 use serde::{Deserialize, Serialize};
 
 use crate::kpcn::Variant;
-use crate::mskp::ScaleCompositor;
 use crate::method::{Method, MethodModel};
 use crate::model::DenoiserConfig;
+use crate::mskp::ScaleCompositor;
 
 /// Version of the metadata layout below; bumped on incompatible changes.
 pub const FORMAT_VERSION: &str = "1";
@@ -106,17 +106,9 @@ pub enum WeightsError {
 /// 5), and the rounding (relative 2⁻¹¹ per weight) moves denoised pixels far less than the noise
 /// the models remove (see `tests::save_load_round_trip`). Training checkpoints keep f32,
 /// since a resumed run must continue bit for bit.
-pub fn save(
-    path: &Path,
-    model: &MethodModel,
-    config: &DenoiserConfig,
-    preset: &str,
-    provenance: &Provenance,
-) -> Result<(), WeightsError> {
+pub fn save(path: &Path, model: &MethodModel, config: &DenoiserConfig, preset: &str, provenance: &Provenance) -> Result<(), WeightsError> {
     let err = |message: String| WeightsError::Save { path: path.to_path_buf(), message };
-    let method = model
-        .method()
-        .ok_or_else(|| err("the model's networks do not form one of the methods g, p, both, guided".into()))?;
+    let method = model.method().ok_or_else(|| err("the model's networks do not form one of the methods g, p, both, guided".into()))?;
     let config_json = serde_json::to_string(config).map_err(|e| err(format!("config: {e}")))?;
     let provenance_json = serde_json::to_string(provenance).map_err(|e| err(format!("provenance: {e}")))?;
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -232,7 +224,10 @@ fn check_config(c: &DenoiserConfig) -> Result<(), String> {
         }
         for (i, g) in m.guides.iter().enumerate() {
             if g.len == 0 || g.start.checked_add(g.len).is_none_or(|end| end > fewest_inputs) || !g.scale.is_finite() {
-                return Err(format!("mskp.guides[{i}]: channels {}+{} outside the {fewest_inputs} inputs of a column, or scale {} not finite", g.start, g.len, g.scale));
+                return Err(format!(
+                    "mskp.guides[{i}]: channels {}+{} outside the {fewest_inputs} inputs of a column, or scale {} not finite",
+                    g.start, g.len, g.scale
+                ));
             }
             if g.variance.is_some_and(|v| v >= fewest_inputs) {
                 return Err(format!("mskp.guides[{i}]: variance channel {:?} outside the {fewest_inputs} inputs of a column", g.variance));
@@ -268,24 +263,19 @@ pub fn load(path: &Path, device: &Device) -> Result<Loaded, WeightsError> {
         return Err(WeightsError::Metadata {
             path: path.to_path_buf(),
             key: keys::CONFIG,
-            message: format!("the {method} model it describes has at least {needed} weights, more than the file's {} bytes can hold", bytes.len()),
+            message: format!(
+                "the {method} model it describes has at least {needed} weights, more than the file's {} bytes can hold",
+                bytes.len()
+            ),
         });
     }
     let mut model = MethodModel::init(&config, method, device);
     // Files are f16 (older ones f32); the networks compute in f32.
-    let mut store = SafetensorsStore::from_bytes(Some(bytes))
-        .allow_partial(true)
-        .validate(false)
-        .with_from_adapter(FloatCastAdapter::to(DType::F32));
-    let result = model
-        .load_from(&mut store)
-        .map_err(|e| WeightsError::Format { path: path.to_path_buf(), message: e.to_string() })?;
-    let mismatch = |tensor: &str, message: String| WeightsError::Mismatch {
-        path: path.to_path_buf(),
-        tensor: tensor.to_string(),
-        method,
-        message,
-    };
+    let mut store =
+        SafetensorsStore::from_bytes(Some(bytes)).allow_partial(true).validate(false).with_from_adapter(FloatCastAdapter::to(DType::F32));
+    let result = model.load_from(&mut store).map_err(|e| WeightsError::Format { path: path.to_path_buf(), message: e.to_string() })?;
+    let mismatch =
+        |tensor: &str, message: String| WeightsError::Mismatch { path: path.to_path_buf(), tensor: tensor.to_string(), method, message };
     if let Some(e) = result.errors.first() {
         return Err(match e {
             ApplyError::ShapeMismatch { path: t, expected, found } => {
@@ -294,9 +284,7 @@ pub fn load(path: &Path, device: &Device) -> Result<Loaded, WeightsError> {
             ApplyError::DTypeMismatch { path: t, expected, found } => {
                 mismatch(t, format!("dtype {found:?} in the file, the model needs {expected:?}"))
             }
-            ApplyError::AdapterError { path: t, message } | ApplyError::LoadError { path: t, message } => {
-                mismatch(t, message.clone())
-            }
+            ApplyError::AdapterError { path: t, message } | ApplyError::LoadError { path: t, message } => mismatch(t, message.clone()),
         });
     }
     if let Some((t, _)) = result.missing.first() {
@@ -335,7 +323,12 @@ mod tests {
         let g = tensor(&r(b * 24 * h * w), [b, 24, h, w], d);
         let desc: Tensor<5> = tensor(&r(b * s * 36 * h * w), [b, s, 36, h, w], d);
         InputTensors {
-            diffuse: BranchInput { colour: tensor(&r(b * 10 * h * w), [b, 10, h, w], d), g_block: g.clone(), descriptors: desc.clone(), spp: s },
+            diffuse: BranchInput {
+                colour: tensor(&r(b * 10 * h * w), [b, 10, h, w], d),
+                g_block: g.clone(),
+                descriptors: desc.clone(),
+                spp: s,
+            },
             specular: BranchInput { colour: tensor(&r(b * 10 * h * w), [b, 10, h, w], d), g_block: g, descriptors: desc, spp: s },
             path_weight: tensor(&r(b * h * w), [b, 1, h, w], d),
         }

@@ -47,7 +47,10 @@ fn mutated_weight_files_load_or_fail_cleanly() {
     let case = dir.join("case.safetensors");
     run_cases("weights", 64, 31, Inputs::Mutated, &mutated(sources.len()), |tally, (i, edits)| {
         std::fs::write(&case, apply_all(&originals[i], &edits)).unwrap();
-        guarded(tally, label(&sources[i], &edits), { let p = case.clone(); move || load(p) })
+        guarded(tally, label(&sources[i], &edits), {
+            let p = case.clone();
+            move || load(p)
+        })
     });
 }
 
@@ -60,7 +63,10 @@ fn weight_files_with_mutated_headers_load_or_fail_cleanly() {
     run_cases("weights (header)", 160, 32, Inputs::Mutated, &mutated(sources.len()), |tally, (i, edits)| {
         let (header, data) = &parts[i];
         std::fs::write(&case, frame(&apply_all(header, &edits), data)).unwrap();
-        guarded(tally, format!("header of {}", label(&sources[i], &edits)), { let p = case.clone(); move || load(p) })
+        guarded(tally, format!("header of {}", label(&sources[i], &edits)), {
+            let p = case.clone();
+            move || load(p)
+        })
     });
 }
 
@@ -78,25 +84,54 @@ fn weight_files_with_mutated_metadata_load_or_fail_cleanly() {
             (serde_json::from_slice(&h).unwrap(), d)
         })
         .collect();
-    const KEYS: &[&str] = &["pixguide.config", "pixguide.config", "pixguide.config", "pixguide.provenance", "pixguide.method", "pixguide.format"];
+    const KEYS: &[&str] =
+        &["pixguide.config", "pixguide.config", "pixguide.config", "pixguide.provenance", "pixguide.method", "pixguide.format"];
     let case = dir.join("case.safetensors");
-    run_cases("weights (metadata)", 192, 34, Inputs::Mutated, &(mutated(sources.len()), prop::sample::select(KEYS)), |tally, ((i, edits), key)| {
-        let (header, data) = &parts[i];
-        let mut header = header.clone();
-        let value = header["__metadata__"][key].as_str().unwrap().as_bytes().to_vec();
-        header["__metadata__"][key] = serde_json::Value::String(String::from_utf8_lossy(&apply_all(&value, &edits)).into_owned());
-        std::fs::write(&case, frame(&serde_json::to_vec(&header).unwrap(), data)).unwrap();
-        guarded(tally, format!("{key} of {}", label(&sources[i], &edits)), {
-            let p = case.clone();
-            move || load(p)
-        })
-    });
+    run_cases(
+        "weights (metadata)",
+        192,
+        34,
+        Inputs::Mutated,
+        &(mutated(sources.len()), prop::sample::select(KEYS)),
+        |tally, ((i, edits), key)| {
+            let (header, data) = &parts[i];
+            let mut header = header.clone();
+            let value = header["__metadata__"][key].as_str().unwrap().as_bytes().to_vec();
+            header["__metadata__"][key] = serde_json::Value::String(String::from_utf8_lossy(&apply_all(&value, &edits)).into_owned());
+            std::fs::write(&case, frame(&serde_json::to_vec(&header).unwrap(), data)).unwrap();
+            guarded(tally, format!("{key} of {}", label(&sources[i], &edits)), {
+                let p = case.clone();
+                move || load(p)
+            })
+        },
+    );
 }
 
 const TOKENS: &[&str] = &[
-    "{", "}", "[", "]", ",", ":", "\"__metadata__\"", "\"pixguide.format\"", "\"1\"", "\"pixguide.method\"", "\"g\"", "\"guided\"",
-    "\"pixguide.config\"", "\"{\\\"kpcn\\\": {}}\"", "\"dtype\"", "\"F16\"", "\"F32\"", "\"shape\"", "\"data_offsets\"", "[0, 2]", "[1]",
-    "\"diffuse.d_g.net.layers.0.weight\"", "0", "2",
+    "{",
+    "}",
+    "[",
+    "]",
+    ",",
+    ":",
+    "\"__metadata__\"",
+    "\"pixguide.format\"",
+    "\"1\"",
+    "\"pixguide.method\"",
+    "\"g\"",
+    "\"guided\"",
+    "\"pixguide.config\"",
+    "\"{\\\"kpcn\\\": {}}\"",
+    "\"dtype\"",
+    "\"F16\"",
+    "\"F32\"",
+    "\"shape\"",
+    "\"data_offsets\"",
+    "[0, 2]",
+    "[1]",
+    "\"diffuse.d_g.net.layers.0.weight\"",
+    "0",
+    "2",
 ];
 
 #[test]
@@ -106,6 +141,9 @@ fn arbitrary_weight_headers_fail_cleanly() {
     let input = (token_soup(TOKENS, 64), prop::collection::vec(any::<u8>(), 0..64));
     run_cases("weights (arbitrary)", 128, 33, Inputs::Arbitrary, &input, |tally, (header, data)| {
         std::fs::write(&case, frame(&header, &data)).unwrap();
-        guarded(tally, format!("header {:?}", String::from_utf8_lossy(&header)), { let p = case.clone(); move || load(p) })
+        guarded(tally, format!("header {:?}", String::from_utf8_lossy(&header)), {
+            let p = case.clone();
+            move || load(p)
+        })
     });
 }

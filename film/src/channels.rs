@@ -9,18 +9,12 @@ pub struct Layer {
 }
 
 pub const RADIANCE: Layer = Layer { mean: &["R", "G", "B"], var: &["Variance.R", "Variance.G", "Variance.B"] };
-pub const DIFFUSE: Layer = Layer {
-    mean: &["Diffuse.R", "Diffuse.G", "Diffuse.B"],
-    var: &["DiffuseVariance.R", "DiffuseVariance.G", "DiffuseVariance.B"],
-};
-pub const SPECULAR: Layer = Layer {
-    mean: &["Specular.R", "Specular.G", "Specular.B"],
-    var: &["SpecularVariance.R", "SpecularVariance.G", "SpecularVariance.B"],
-};
-pub const ALBEDO: Layer = Layer {
-    mean: &["Albedo.R", "Albedo.G", "Albedo.B"],
-    var: &["AlbedoVariance.R", "AlbedoVariance.G", "AlbedoVariance.B"],
-};
+pub const DIFFUSE: Layer =
+    Layer { mean: &["Diffuse.R", "Diffuse.G", "Diffuse.B"], var: &["DiffuseVariance.R", "DiffuseVariance.G", "DiffuseVariance.B"] };
+pub const SPECULAR: Layer =
+    Layer { mean: &["Specular.R", "Specular.G", "Specular.B"], var: &["SpecularVariance.R", "SpecularVariance.G", "SpecularVariance.B"] };
+pub const ALBEDO: Layer =
+    Layer { mean: &["Albedo.R", "Albedo.G", "Albedo.B"], var: &["AlbedoVariance.R", "AlbedoVariance.G", "AlbedoVariance.B"] };
 pub const NORMAL: Layer = Layer { mean: &["Ns.X", "Ns.Y", "Ns.Z"], var: &["NsVariance.X", "NsVariance.Y", "NsVariance.Z"] };
 pub const DEPTH: Layer = Layer { mean: &["Depth.Z"], var: &["DepthVariance.Z"] };
 

@@ -53,8 +53,7 @@ impl Descriptors {
     pub fn write_safetensors(&self, path: &Path) -> Result<()> {
         let bytes: Vec<u8> = self.data.iter().flat_map(|v| v.to_le_bytes()).collect();
         let shape = vec![self.height as usize, self.width as usize, self.spp as usize, FIELDS];
-        let view = safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape, &bytes)
-            .map_err(|e| Error::image(path, e))?;
+        let view = safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape, &bytes).map_err(|e| Error::image(path, e))?;
         // One metadata entry only: safetensors keeps metadata in a HashMap, whose iteration
         // order (and so the file's bytes) would vary between runs with two or more keys.
         let mut meta = HashMap::new();
@@ -72,7 +71,10 @@ impl Descriptors {
         let t = st.tensor("descriptors").map_err(|e| Error::image(path, format!("tensor `descriptors`: {e}")))?;
         let shape = t.shape();
         if t.dtype() != safetensors::Dtype::F32 || shape.len() != 4 || shape[3] != FIELDS {
-            return Err(Error::image(path, format!("tensor `descriptors` must be f32 [H, W, S, {FIELDS}], found {:?} {:?}", t.dtype(), shape)));
+            return Err(Error::image(
+                path,
+                format!("tensor `descriptors` must be f32 [H, W, S, {FIELDS}], found {:?} {:?}", t.dtype(), shape),
+            ));
         }
         let data = t.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
         Ok(Descriptors { width: shape[1] as u32, height: shape[0] as u32, spp: shape[2] as u32, data })

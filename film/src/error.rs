@@ -7,7 +7,11 @@ use std::path::PathBuf;
 pub enum Error {
     /// A file could not be read or written.
     #[error("{file}: {source}")]
-    Io { file: PathBuf, #[source] source: std::io::Error },
+    Io {
+        file: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
     /// A file could not be decoded or encoded.
     #[error("{file}: {message}")]
     Image { file: PathBuf, message: String },

@@ -1,8 +1,8 @@
 //! Frames to and from one single-part EXR (f32, ZIP-compressed, channels named in `channels`).
 
 use crate::channels::{self, Layer};
-use crate::{Frame, PixelBuffer};
 use crate::{Error, Result};
+use crate::{Frame, PixelBuffer};
 use exr::prelude::*;
 use std::collections::HashMap;
 use std::path::Path;
@@ -81,12 +81,8 @@ pub fn read_frame(path: &Path) -> Result<Frame> {
         .map_err(|e| Error::image(path, e))?;
     let layer = &image.layer_data;
     let (w, h) = (layer.size.0, layer.size.1);
-    let map: HashMap<String, Vec<f32>> = layer
-        .channel_data
-        .list
-        .iter()
-        .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
-        .collect();
+    let map: HashMap<String, Vec<f32>> =
+        layer.channel_data.list.iter().map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect())).collect();
     let get = |l: &Layer| -> Option<PixelBuffer> {
         let mut buf = PixelBuffer::new(l.mean.len(), w * h);
         for (c, name) in l.mean.iter().enumerate() {
@@ -107,7 +103,8 @@ pub fn read_frame(path: &Path) -> Result<Frame> {
         Some(AttributeValue::Text(t)) => t.to_string(),
         _ => String::new(),
     };
-    let field = |name: &str| meta.split_whitespace().find_map(|kv| kv.strip_prefix(name).and_then(|v| v.strip_prefix('=')).map(str::to_string));
+    let field =
+        |name: &str| meta.split_whitespace().find_map(|kv| kv.strip_prefix(name).and_then(|v| v.strip_prefix('=')).map(str::to_string));
     let spp = field(channels::ATTR_SPP).and_then(|v| v.parse().ok()).unwrap_or(0);
     let depth_scale = field(channels::ATTR_DEPTH_SCALE).and_then(|v| v.parse().ok()).unwrap_or(1.0);
     Ok(Frame {
@@ -134,7 +131,10 @@ fn check_frame_size(path: &Path) -> Result<()> {
     let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| Error::image(path, e))?;
     for (i, h) in meta.headers.iter().enumerate() {
         let (w, hh) = (h.layer_size.0, h.layer_size.1);
-        if w > MAX_RESOLUTION_SIDE as usize || hh > MAX_RESOLUTION_SIDE as usize || (w as u64).saturating_mul(hh as u64) > MAX_RESOLUTION_PIXELS {
+        if w > MAX_RESOLUTION_SIDE as usize
+            || hh > MAX_RESOLUTION_SIDE as usize
+            || (w as u64).saturating_mul(hh as u64) > MAX_RESOLUTION_PIXELS
+        {
             return Err(Error::image(
                 path,
                 format!("layer {i}: dataWindow of {w}×{hh} pixels is larger than any frame ({MAX_RESOLUTION_SIDE} per side, 2^26 pixels)"),
@@ -147,7 +147,11 @@ fn check_frame_size(path: &Path) -> Result<()> {
 /// Writes three planes of linear RGB (e.g. an environment map) as a plain `R,G,B` f32 EXR.
 pub fn write_rgb_planes(path: &Path, width: u32, height: u32, [r, g, b]: [Vec<f32>; 3]) -> Result<()> {
     let (w, h) = (width as usize, height as usize);
-    let list = vec![AnyChannel::new("R", FlatSamples::F32(r)), AnyChannel::new("G", FlatSamples::F32(g)), AnyChannel::new("B", FlatSamples::F32(b))];
+    let list = vec![
+        AnyChannel::new("R", FlatSamples::F32(r)),
+        AnyChannel::new("G", FlatSamples::F32(g)),
+        AnyChannel::new("B", FlatSamples::F32(b)),
+    ];
     let layer = exr::image::Layer::new((w, h), LayerAttributes::default(), deterministic_encoding(), AnyChannels::sort(list.into()));
     let tmp = tmp_path(path);
     Image::from_layer(layer).write().to_file(&tmp).map_err(|e| Error::image(&tmp, e))?;

@@ -82,7 +82,11 @@ impl PixelBuffer {
 }
 
 fn finite_or_zero(x: f32) -> f32 {
-    if x.is_finite() { x } else { 0.0 }
+    if x.is_finite() {
+        x
+    } else {
+        0.0
+    }
 }
 
 /// What a consumer of a render needs besides radiance. Anything not asked for is neither
@@ -135,7 +139,14 @@ impl Frame {
 
     /// True when every stored value is finite (a render must never produce anything else).
     pub fn all_finite(&self) -> bool {
-        let bufs = [Some(&self.radiance), self.diffuse.as_ref(), self.specular.as_ref(), self.albedo.as_ref(), self.normal.as_ref(), self.depth.as_ref()];
+        let bufs = [
+            Some(&self.radiance),
+            self.diffuse.as_ref(),
+            self.specular.as_ref(),
+            self.albedo.as_ref(),
+            self.normal.as_ref(),
+            self.depth.as_ref(),
+        ];
         bufs.iter().flatten().all(|b| b.mean.iter().chain(b.var.iter()).all(|v| v.is_finite()))
             && self.descriptors.as_ref().is_none_or(|d| d.data.iter().all(|v| v.is_finite()))
     }
@@ -207,6 +218,9 @@ mod tests {
         let all = stats(&xs);
         let mut a = stats(&xs[..10]);
         a.merge(10, &stats(&xs[10..]), 27);
-        assert!((a.mean[0] - all.mean[0]).abs() < 1e-5 && (a.var[0] - all.var[0]).abs() < 1e-5 * all.var[0].abs().max(1.0), "{a:?} vs {all:?}");
+        assert!(
+            (a.mean[0] - all.mean[0]).abs() < 1e-5 && (a.var[0] - all.var[0]).abs() < 1e-5 * all.var[0].abs().max(1.0),
+            "{a:?} vs {all:?}"
+        );
     }
 }

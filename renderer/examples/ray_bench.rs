@@ -40,7 +40,12 @@ fn main() {
                     let _ = trace(&accel, batch, threads);
                     rates.push(batch.len() as f64 / t0.elapsed().as_secs_f64() * 1e-6);
                 }
-                println!("{name} preset {pname:<10} build {:>7.1} ms, camera {:.2} Mrays/s, random {:.2} Mrays/s", b * 1e3, rates[0], rates[1]);
+                println!(
+                    "{name} preset {pname:<10} build {:>7.1} ms, camera {:.2} Mrays/s, random {:.2} Mrays/s",
+                    b * 1e3,
+                    rates[0],
+                    rates[1]
+                );
             }
         }
         let report = ray_bench(mesh, &[("camera", &cam), ("random", &rnd)], threads, 3, Some(&setup)).expect("bench runs");

@@ -69,7 +69,11 @@ impl RayBatch {
                 centre
             } else {
                 let (a, b) = edges[rng.below(edges.len() as u32) as usize];
-                if rng.below(2) == 0 { a + (b - a) * 0.5 } else { a + (b - a) * rng.next_f32() }
+                if rng.below(2) == 0 {
+                    a + (b - a) * 0.5
+                } else {
+                    a + (b - a) * rng.next_f32()
+                }
             };
             let d = (target - eye).normalize_or(forward);
             batch.push(eye, d, f32::INFINITY);
@@ -137,9 +141,7 @@ fn interior_edges(mesh: &Mesh, eye: Vec3) -> Vec<(Vec3, Vec3)> {
 
 /// Closest hits of every ray of `batch`, on `threads` threads (0 = rayon's global pool).
 pub fn trace(accel: &Accel, batch: &RayBatch, threads: usize) -> Vec<Option<Hit>> {
-    let run = || {
-        (0..batch.len()).into_par_iter().with_min_len(1024).map(|i| accel.intersect(&batch.ray(i), batch.tmax[i])).collect()
-    };
+    let run = || (0..batch.len()).into_par_iter().with_min_len(1024).map(|i| accel.intersect(&batch.ray(i), batch.tmax[i])).collect();
     if threads == 0 {
         run()
     } else {
@@ -205,7 +207,13 @@ pub fn embree_trace(python: &Path, script: &Path, work_dir: &Path, mesh: &Mesh, 
         put(t.min(1e37));
     }
     std::fs::write(&input, &buf).map_err(|e| Error::io(&input, e))?;
-    let out = Command::new(python).arg(script).arg(&input).arg(&output).arg(if robust { "robust" } else { "fast" }).output().map_err(|e| Error::io(script, e))?;
+    let out = Command::new(python)
+        .arg(script)
+        .arg(&input)
+        .arg(&output)
+        .arg(if robust { "robust" } else { "fast" })
+        .output()
+        .map_err(|e| Error::io(script, e))?;
     let _ = std::fs::remove_file(&input);
     if !out.status.success() {
         return Err(Error::Invalid(format!("{} failed: {}", script.display(), String::from_utf8_lossy(&out.stderr))));
@@ -275,7 +283,13 @@ pub struct EmbreeSetup {
 /// `threads` threads, with one, and with Embree if `embree` is given, alternating run by run
 /// (best of `repeats` runs each). Rays/s count closest-hit queries only; see `RaySetReport`
 /// for the clocks.
-pub fn ray_bench(mesh: &Mesh, sets: &[(&str, &RayBatch)], threads: usize, repeats: usize, embree: Option<&EmbreeSetup>) -> Result<RayBenchReport> {
+pub fn ray_bench(
+    mesh: &Mesh,
+    sets: &[(&str, &RayBatch)],
+    threads: usize,
+    repeats: usize,
+    embree: Option<&EmbreeSetup>,
+) -> Result<RayBenchReport> {
     let threads = threads.max(1);
     let pool = |n: usize| rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| Error::Invalid(e.to_string()));
     let pool_mt = pool(threads)?;
@@ -344,7 +358,14 @@ pub fn ray_bench(mesh: &Mesh, sets: &[(&str, &RayBatch)], threads: usize, repeat
 
 impl fmt::Display for RayBenchReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(f, "{} triangles: BVH build {:.1} ms on {} threads ({} BVH8 nodes)", self.triangles, self.build_seconds * 1e3, self.threads, self.bvh_nodes)?;
+        writeln!(
+            f,
+            "{} triangles: BVH build {:.1} ms on {} threads ({} BVH8 nodes)",
+            self.triangles,
+            self.build_seconds * 1e3,
+            self.threads,
+            self.bvh_nodes
+        )?;
         if let Some(b) = self.embree_build_seconds {
             writeln!(f, "  Embree scene build {:.1} ms (embreex default: TBB threads)", b * 1e3)?;
         }

@@ -10,7 +10,11 @@ pub enum Error {
     Scene { file: PathBuf, field: String, message: String },
     /// A file could not be read or written.
     #[error("{file}: {source}")]
-    Io { file: PathBuf, #[source] source: std::io::Error },
+    Io {
+        file: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
     /// An image could not be decoded or encoded.
     #[error("{file}: {message}")]
     Image { file: PathBuf, message: String },

@@ -7,11 +7,11 @@
 use crate::camera::Camera;
 use crate::light::{Environment, Lights};
 use crate::math::luminance;
-use crate::texture::Texture;
 use crate::math::Ray;
 use crate::rng::Pcg32;
 use crate::scene::{ColorParam, Material, MaterialKind, Scene};
 use crate::sky::{bake, SkyParams};
+use crate::texture::Texture;
 use glam::Vec3;
 use serde::Serialize;
 
@@ -44,8 +44,8 @@ pub struct Original {
 impl Original {
     pub fn of(scene: &Scene) -> Original {
         let fov_deg = 2.0 * scene.camera.tan_half_vfov().atan().to_degrees();
-        let has_environment = scene.lights.env_radiance(Vec3::Y).max_element() > 0.0
-            || scene.lights.env_radiance(Vec3::X).max_element() > 0.0;
+        let has_environment =
+            scene.lights.env_radiance(Vec3::Y).max_element() > 0.0 || scene.lights.env_radiance(Vec3::X).max_element() > 0.0;
         // E_h/π of the environment by the midpoint rule on a 32 × 64 (θ, φ) grid of the upper
         // hemisphere; a sun disk of 1.5° falls between grid points now and then, so this is
         // only a level, good to some ten per cent, which is all an exposure range needs.
@@ -136,8 +136,16 @@ fn random_material(orig: &Material, rng: &mut Pcg32) -> Material {
         return m;
     }
     m.kind = match &orig.kind {
-        MaterialKind::Dielectric { ior, tint, .. } => MaterialKind::Dielectric { ior: *ior, roughness: roughness(rng), tint: *tint, dist: Default::default() },
-        MaterialKind::Conductor { eta, k, specular_tint, .. } => MaterialKind::Conductor { eta: *eta, k: *k, roughness: roughness(rng), specular_tint: specular_tint.clone(), dist: Default::default() },
+        MaterialKind::Dielectric { ior, tint, .. } => {
+            MaterialKind::Dielectric { ior: *ior, roughness: roughness(rng), tint: *tint, dist: Default::default() }
+        }
+        MaterialKind::Conductor { eta, k, specular_tint, .. } => MaterialKind::Conductor {
+            eta: *eta,
+            k: *k,
+            roughness: roughness(rng),
+            specular_tint: specular_tint.clone(),
+            dist: Default::default(),
+        },
         MaterialKind::Lambert { albedo } | MaterialKind::Plastic { albedo, .. } => {
             let colour = Vec3::new(uniform(rng, 0.01, 1.0), uniform(rng, 0.01, 1.0), uniform(rng, 0.01, 1.0));
             // Keep textures half of the time: they carry the fine detail denoisers must keep.
@@ -148,7 +156,13 @@ fn random_material(orig: &Material, rng: &mut Pcg32) -> Material {
             if rng.next_f32() < 0.6 {
                 MaterialKind::Lambert { albedo }
             } else {
-                MaterialKind::Plastic { albedo, ior: uniform(rng, 1.3, 1.8), roughness: roughness(rng), dist: Default::default(), nonlinear: true }
+                MaterialKind::Plastic {
+                    albedo,
+                    ior: uniform(rng, 1.3, 1.8),
+                    roughness: roughness(rng),
+                    dist: Default::default(),
+                    nonlinear: true,
+                }
             }
         }
     };
@@ -204,7 +218,14 @@ pub fn randomize(scene: &mut Scene, orig: &Original, name: &str, shot: u32, seed
     let (w, h) = (orig.camera.width, orig.camera.height);
 
     // Camera: the original view is one candidate, so a scene never gets a worse view than its own.
-    let mut best = (camera_score(scene, &orig.camera), orig.camera.clone(), orig.camera.position, orig.camera.position + orig.camera.forward, orig.camera.up, orig.fov_deg);
+    let mut best = (
+        camera_score(scene, &orig.camera),
+        orig.camera.clone(),
+        orig.camera.position,
+        orig.camera.position + orig.camera.forward,
+        orig.camera.up,
+        orig.fov_deg,
+    );
     best.0 *= 0.8; // prefer new views when they are about as good
     let orig_target = original_target(scene, &orig.camera);
     for k in 0..12 {
@@ -263,7 +284,10 @@ pub fn randomize(scene: &mut Scene, orig: &Original, name: &str, shot: u32, seed
         };
         let white = lo * (hi / lo).powf(rng.next_f32());
         let scale = sky_scale_for(&image, white);
-        let name = format!("sky elev {:.1} az {:.1} turbidity {:.2} sun/sky {:.2} scale {:.2}", p.sun_elevation_deg, p.sun_azimuth_deg, p.turbidity, p.sun_to_sky, scale);
+        let name = format!(
+            "sky elev {:.1} az {:.1} turbidity {:.2} sun/sky {:.2} scale {:.2}",
+            p.sun_elevation_deg, p.sun_azimuth_deg, p.turbidity, p.sun_to_sky, scale
+        );
         (Environment::Map { image, rotation_deg: rotation, scale }, name)
     } else {
         (Environment::Constant(Vec3::ZERO), "none".to_string())

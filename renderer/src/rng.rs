@@ -79,9 +79,24 @@ mod tests {
 
     #[test]
     fn neighbouring_streams_differ() {
-        let a: Vec<u32> = (0..8).map({ let mut r = Pcg32::for_sample(1, 0, 0); move |_| r.next_u32() }).collect();
-        let b: Vec<u32> = (0..8).map({ let mut r = Pcg32::for_sample(1, 0, 1); move |_| r.next_u32() }).collect();
-        let c: Vec<u32> = (0..8).map({ let mut r = Pcg32::for_sample(1, 1, 0); move |_| r.next_u32() }).collect();
+        let a: Vec<u32> = (0..8)
+            .map({
+                let mut r = Pcg32::for_sample(1, 0, 0);
+                move |_| r.next_u32()
+            })
+            .collect();
+        let b: Vec<u32> = (0..8)
+            .map({
+                let mut r = Pcg32::for_sample(1, 0, 1);
+                move |_| r.next_u32()
+            })
+            .collect();
+        let c: Vec<u32> = (0..8)
+            .map({
+                let mut r = Pcg32::for_sample(1, 1, 0);
+                move |_| r.next_u32()
+            })
+            .collect();
         assert_ne!(a, b);
         assert_ne!(a, c);
         assert_ne!(b, c);

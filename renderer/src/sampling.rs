@@ -9,11 +9,7 @@ pub fn square_to_disk_concentric(u: Vec2) -> Vec2 {
     if o.x == 0.0 && o.y == 0.0 {
         return Vec2::ZERO;
     }
-    let (r, theta) = if o.x.abs() > o.y.abs() {
-        (o.x, (PI / 4.0) * (o.y / o.x))
-    } else {
-        (o.y, PI / 2.0 - (PI / 4.0) * (o.x / o.y))
-    };
+    let (r, theta) = if o.x.abs() > o.y.abs() { (o.x, (PI / 4.0) * (o.y / o.x)) } else { (o.y, PI / 2.0 - (PI / 4.0) * (o.x / o.y)) };
     r * Vec2::new(theta.cos(), theta.sin())
 }
 

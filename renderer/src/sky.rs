@@ -56,12 +56,8 @@ fn perez(theta: f32, gamma: f32, c: [f32; 5]) -> f32 {
 fn xyy_to_linear_srgb(x: f32, y: f32, lum: f32) -> Vec3 {
     let y_ = y.max(1e-6);
     let (cx, cy, cz) = (x / y_ * lum, lum, (1.0 - x - y) / y_ * lum);
-    Vec3::new(
-        3.2406 * cx - 1.5372 * cy - 0.4986 * cz,
-        -0.9689 * cx + 1.8758 * cy + 0.0415 * cz,
-        0.0557 * cx - 0.2040 * cy + 1.0570 * cz,
-    )
-    .max(Vec3::ZERO)
+    Vec3::new(3.2406 * cx - 1.5372 * cy - 0.4986 * cz, -0.9689 * cx + 1.8758 * cy + 0.0415 * cz, 0.0557 * cx - 0.2040 * cy + 1.0570 * cz)
+        .max(Vec3::ZERO)
 }
 
 /// The sky radiance (zenith luminance 1) in direction (θ, γ) for sun zenith angle `theta_s`.
@@ -70,8 +66,12 @@ fn preetham(theta: f32, gamma: f32, theta_s: f32, t: f32) -> Vec3 {
     let cx = [-0.0193 * t - 0.2592, -0.0665 * t + 0.0008, -0.0004 * t + 0.2125, -0.0641 * t - 0.8989, -0.0033 * t + 0.0452];
     let cyy = [-0.0167 * t - 0.2608, -0.0950 * t + 0.0092, -0.0079 * t + 0.2102, -0.0441 * t - 1.6537, -0.0109 * t + 0.0529];
     let (t2, ts, ts2, ts3) = (t * t, theta_s, theta_s * theta_s, theta_s * theta_s * theta_s);
-    let zx = (0.00166 * ts3 - 0.00375 * ts2 + 0.00209 * ts) * t2 + (-0.02903 * ts3 + 0.06377 * ts2 - 0.03202 * ts + 0.00394) * t + (0.11693 * ts3 - 0.21196 * ts2 + 0.06052 * ts + 0.25886);
-    let zy = (0.00275 * ts3 - 0.00610 * ts2 + 0.00317 * ts) * t2 + (-0.04214 * ts3 + 0.08970 * ts2 - 0.04153 * ts + 0.00516) * t + (0.15346 * ts3 - 0.26756 * ts2 + 0.06670 * ts + 0.26688);
+    let zx = (0.00166 * ts3 - 0.00375 * ts2 + 0.00209 * ts) * t2
+        + (-0.02903 * ts3 + 0.06377 * ts2 - 0.03202 * ts + 0.00394) * t
+        + (0.11693 * ts3 - 0.21196 * ts2 + 0.06052 * ts + 0.25886);
+    let zy = (0.00275 * ts3 - 0.00610 * ts2 + 0.00317 * ts) * t2
+        + (-0.04214 * ts3 + 0.08970 * ts2 - 0.04153 * ts + 0.00516) * t
+        + (0.15346 * ts3 - 0.26756 * ts2 + 0.06670 * ts + 0.26688);
     let lum = perez(theta, gamma, cy) / perez(0.0, theta_s, cy);
     let x = zx * perez(theta, gamma, cx) / perez(0.0, theta_s, cx);
     let y = zy * perez(theta, gamma, cyy) / perez(0.0, theta_s, cyy);

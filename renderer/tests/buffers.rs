@@ -20,10 +20,38 @@ fn mixed_scene(w: u32, h: u32) -> renderer::scene::Scene {
     scene(
         vec![
             (quad(), Mat4::from_rotation_x(-FRAC_PI_2) * Mat4::from_scale(Vec3::splat(3.0)), lambert(0.6)),
-            (sphere(0.35, 24), Mat4::from_translation(Vec3::new(-0.6, 0.35, 0.0)), with_kind(MaterialKind::Plastic { albedo: ColorParam::Const(Vec3::new(0.1, 0.4, 0.8)), ior: 1.5, roughness: 0.05, dist: Default::default(), nonlinear: true })),
-            (sphere(0.35, 24), Mat4::from_translation(Vec3::new(0.0, 0.35, 0.0)), with_kind(MaterialKind::Conductor { eta: Vec3::new(0.2, 0.9, 1.1), k: Vec3::new(3.9, 2.4, 2.2), roughness: 0.15, specular_tint: ColorParam::Const(Vec3::ONE), dist: Default::default() })),
-            (sphere(0.35, 24), Mat4::from_translation(Vec3::new(0.6, 0.35, 0.0)), with_kind(MaterialKind::Dielectric { ior: 1.5, roughness: 0.0, tint: Vec3::ONE, dist: Default::default() })),
-            (quad(), Mat4::from_translation(Vec3::new(0.0, 2.0, 0.0)) * Mat4::from_rotation_x(FRAC_PI_2) * Mat4::from_scale(Vec3::splat(0.5)), emitter(Vec3::splat(10.0))),
+            (
+                sphere(0.35, 24),
+                Mat4::from_translation(Vec3::new(-0.6, 0.35, 0.0)),
+                with_kind(MaterialKind::Plastic {
+                    albedo: ColorParam::Const(Vec3::new(0.1, 0.4, 0.8)),
+                    ior: 1.5,
+                    roughness: 0.05,
+                    dist: Default::default(),
+                    nonlinear: true,
+                }),
+            ),
+            (
+                sphere(0.35, 24),
+                Mat4::from_translation(Vec3::new(0.0, 0.35, 0.0)),
+                with_kind(MaterialKind::Conductor {
+                    eta: Vec3::new(0.2, 0.9, 1.1),
+                    k: Vec3::new(3.9, 2.4, 2.2),
+                    roughness: 0.15,
+                    specular_tint: ColorParam::Const(Vec3::ONE),
+                    dist: Default::default(),
+                }),
+            ),
+            (
+                sphere(0.35, 24),
+                Mat4::from_translation(Vec3::new(0.6, 0.35, 0.0)),
+                with_kind(MaterialKind::Dielectric { ior: 1.5, roughness: 0.0, tint: Vec3::ONE, dist: Default::default() }),
+            ),
+            (
+                quad(),
+                Mat4::from_translation(Vec3::new(0.0, 2.0, 0.0)) * Mat4::from_rotation_x(FRAC_PI_2) * Mat4::from_scale(Vec3::splat(0.5)),
+                emitter(Vec3::splat(10.0)),
+            ),
         ],
         Environment::Constant(Vec3::splat(0.3)),
         cam,
@@ -53,7 +81,8 @@ fn albedo_of_a_textured_plane_equals_the_texture() {
     // A quad filling the view exactly, head-on: pixel centre (x+½)/W, (y+½)/H ↦ uv. The mean of
     // a bilinear texture over a pixel footprint equals its value at the centre when the
     // footprint stays inside one bilinear cell; we test those pixels.
-    let tex = Texture { width: 4, height: 4, texels: (0..16).map(|i| Vec3::new((i % 4) as f32 / 3.0, (i / 4) as f32 / 3.0, 0.5)).collect() };
+    let tex =
+        Texture { width: 4, height: 4, texels: (0..16).map(|i| Vec3::new((i % 4) as f32 / 3.0, (i / 4) as f32 / 3.0, 0.5)).collect() };
     let d = 2.0f32;
     let fov = 2.0 * (1.0 / d).atan().to_degrees();
     let cam = camera(Vec3::new(0.0, 0.0, d), Vec3::ZERO, fov, 64, 64);
@@ -111,7 +140,12 @@ fn normals_are_unit_and_depth_matches_a_head_on_plane() {
                 let sy = (1.0 - 2.0 * cy / h as f32) * t;
                 d * (1.0 + sx * sx + sy * sy).sqrt()
             };
-            let ds = [corner(x as f32, y as f32), corner(x as f32 + 1.0, y as f32), corner(x as f32, y as f32 + 1.0), corner(x as f32 + 1.0, y as f32 + 1.0)];
+            let ds = [
+                corner(x as f32, y as f32),
+                corner(x as f32 + 1.0, y as f32),
+                corner(x as f32, y as f32 + 1.0),
+                corner(x as f32 + 1.0, y as f32 + 1.0),
+            ];
             let (lo, hi) = (ds.iter().cloned().fold(f32::MAX, f32::min), ds.iter().cloned().fold(0.0, f32::max));
             let dist = z.mean[i] * f.depth_scale;
             let (lo, hi) = (lo.min(d), hi); // the footprint may contain the foot of the perpendicular
@@ -125,7 +159,13 @@ fn gbuffers_look_through_a_mirror() {
     // Camera looks down −Z at a mirror tilted 45° that reflects the view up (+Y) onto a red
     // sphere: the G-buffers must show the sphere, not the mirror.
     let cam = camera(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, 10.0, 16, 16);
-    let mirror = with_kind(MaterialKind::Conductor { eta: Vec3::new(0.155, 0.117, 0.138), k: Vec3::new(4.83, 3.12, 2.15), roughness: 0.0, specular_tint: ColorParam::Const(Vec3::ONE), dist: Default::default() });
+    let mirror = with_kind(MaterialKind::Conductor {
+        eta: Vec3::new(0.155, 0.117, 0.138),
+        k: Vec3::new(4.83, 3.12, 2.15),
+        roughness: 0.0,
+        specular_tint: ColorParam::Const(Vec3::ONE),
+        dist: Default::default(),
+    });
     let red = with_kind(MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::new(0.8, 0.1, 0.1)) });
     let s = scene(
         vec![
@@ -157,12 +197,16 @@ fn variance_buffer_matches_the_spread_of_independent_renders() {
     // mix-up at 4 spp (25 %) or a missing 1/S (300 %).
     let cam = camera(Vec3::new(0.0, 1.0, 3.0), Vec3::ZERO, 40.0, 24, 16);
     let s = scene(
-        vec![(quad(), Mat4::from_rotation_x(-FRAC_PI_2) * Mat4::from_scale(Vec3::splat(5.0)), lambert(0.7)), (sphere(0.5, 24), Mat4::IDENTITY, lambert(0.5))],
+        vec![
+            (quad(), Mat4::from_rotation_x(-FRAC_PI_2) * Mat4::from_scale(Vec3::splat(5.0)), lambert(0.7)),
+            (sphere(0.5, 24), Mat4::IDENTITY, lambert(0.5)),
+        ],
         Environment::Constant(Vec3::ONE),
         cam,
         vec![],
     );
-    let runs: Vec<_> = (0..32).map(|k| render(&s, 4, 1000 + k, 3, BufferRequest { split: true, gbuffers: true, descriptors: false })).collect();
+    let runs: Vec<_> =
+        (0..32).map(|k| render(&s, 4, 1000 + k, 3, BufferRequest { split: true, gbuffers: true, descriptors: false })).collect();
     let check = |get: &dyn Fn(&renderer::film::Frame) -> &renderer::film::PixelBuffer, name: &str| {
         let n = get(&runs[0]).mean.len();
         let (mut emp, mut buf) = (0.0f64, 0.0f64);
@@ -189,7 +233,11 @@ fn floor_and_light() -> renderer::scene::Scene {
     scene(
         vec![
             (quad(), Mat4::from_rotation_x(-FRAC_PI_2) * Mat4::from_scale(Vec3::splat(4.0)), lambert(0.6)),
-            (quad(), Mat4::from_translation(Vec3::new(0.0, 1.0, 0.0)) * Mat4::from_rotation_x(FRAC_PI_2), emitter(Vec3::new(4.0, 3.0, 2.0))),
+            (
+                quad(),
+                Mat4::from_translation(Vec3::new(0.0, 1.0, 0.0)) * Mat4::from_rotation_x(FRAC_PI_2),
+                emitter(Vec3::new(4.0, 3.0, 2.0)),
+            ),
         ],
         Environment::Constant(Vec3::ZERO),
         cam,
@@ -276,7 +324,15 @@ fn descriptor_bands_keep_the_image_and_put_records_at_their_pixels() {
     let d = full.descriptors.as_ref().unwrap();
     assert!(d.data.iter().any(|&v| v != 0.0));
     let (x0, y0, w, h) = (5u32, 17u32, 30u32, 12u32);
-    let opts = renderer::integrator::RenderOptions { spp: 3, seed: 11, max_bounces: 5, russian_roulette: false, request: BufferRequest::ALL, crop: Some((x0, y0, w, h)), first_sample: 0 };
+    let opts = renderer::integrator::RenderOptions {
+        spp: 3,
+        seed: 11,
+        max_bounces: 5,
+        russian_roulette: false,
+        request: BufferRequest::ALL,
+        crop: Some((x0, y0, w, h)),
+        first_sample: 0,
+    };
     let (crop, _) = renderer::integrator::render(&s, &opts, &|_| {}).unwrap();
     let c = crop.descriptors.as_ref().unwrap();
     let per_pixel = 3 * FIELDS;
@@ -284,7 +340,11 @@ fn descriptor_bands_keep_the_image_and_put_records_at_their_pixels() {
         for x in 0..w as usize {
             let i = y * w as usize + x;
             let j = (y + y0 as usize) * 37 + x + x0 as usize;
-            assert_eq!(c.data[i * per_pixel..(i + 1) * per_pixel], d.data[j * per_pixel..(j + 1) * per_pixel], "pixel ({x}, {y}) of the crop");
+            assert_eq!(
+                c.data[i * per_pixel..(i + 1) * per_pixel],
+                d.data[j * per_pixel..(j + 1) * per_pixel],
+                "pixel ({x}, {y}) of the crop"
+            );
         }
     }
 }

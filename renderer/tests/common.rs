@@ -12,11 +12,23 @@ use renderer::scene::{ColorParam, Material, MaterialKind, RenderSettings, Scene,
 use renderer::texture::Texture;
 
 pub fn lambert(albedo: f32) -> Material {
-    Material { name: "lambert".into(), kind: MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::splat(albedo)) }, emission: Vec3::ZERO, two_sided_emission: false, one_sided: false }
+    Material {
+        name: "lambert".into(),
+        kind: MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::splat(albedo)) },
+        emission: Vec3::ZERO,
+        two_sided_emission: false,
+        one_sided: false,
+    }
 }
 
 pub fn emitter(emission: Vec3) -> Material {
-    Material { name: "light".into(), kind: MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::ZERO) }, emission, two_sided_emission: false, one_sided: false }
+    Material {
+        name: "light".into(),
+        kind: MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::ZERO) },
+        emission,
+        two_sided_emission: false,
+        one_sided: false,
+    }
 }
 
 pub fn with_kind(kind: MaterialKind) -> Material {

@@ -24,9 +24,8 @@ fn load_obj(rel: &str) -> Mesh {
 #[test]
 fn matches_embree_on_a_million_rays() {
     let venv = workspace().join("target/embree-venv");
-    let python = embree_python(&venv).unwrap_or_else(|e| {
-        panic!("the Embree cross-check needs python3 -m venv and `pip install embreex numpy` (PyPI) to work: {e}")
-    });
+    let python = embree_python(&venv)
+        .unwrap_or_else(|e| panic!("the Embree cross-check needs python3 -m venv and `pip install embreex numpy` (PyPI) to work: {e}"));
     let script = embree_script(&workspace());
     let work = workspace().join("target/embree-crosscheck");
 
@@ -45,7 +44,9 @@ fn matches_embree_on_a_million_rays() {
         let accel = Accel::build(mesh);
         let (lo, hi) = mesh.bounds();
         let radius = (hi - lo).length();
-        for (set, batch) in [("camera", RayBatch::camera(mesh, per_set, k as u64)), ("random", RayBatch::random_in_bounds(mesh, per_set, k as u64))] {
+        for (set, batch) in
+            [("camera", RayBatch::camera(mesh, per_set, k as u64)), ("random", RayBatch::random_in_bounds(mesh, per_set, k as u64))]
+        {
             let ours = trace(&accel, &batch, 0);
             let theirs = embree_trace(&python, &script, &work, mesh, &batch, true).unwrap_or_else(|e| panic!("{name}/{set}: {e}"));
             let (mut hm, mut to, mut bh) = (0, 0, 0);
@@ -58,7 +59,12 @@ fn matches_embree_on_a_million_rays() {
                         if (a.t - t).abs() > 1e-4 * a.t.max(*t) + 1e-6 * radius {
                             to += 1;
                             if to <= 3 {
-                                eprintln!("{name}/{set} ray {i} {:?}: ours t={} prim {}, Embree t={t} prim {prim}", batch.ray(i), a.t, a.prim);
+                                eprintln!(
+                                    "{name}/{set} ray {i} {:?}: ours t={} prim {}, Embree t={t} prim {prim}",
+                                    batch.ray(i),
+                                    a.t,
+                                    a.prim
+                                );
                             }
                         }
                     }
@@ -89,4 +95,3 @@ fn matches_embree_on_a_million_rays() {
     // relative). A t disagreement means one of us skipped the nearer triangle: same budget.
     assert!(t_off as f64 <= 1e-4 * total as f64, "{t_off} t disagreements in {total} rays");
 }
-

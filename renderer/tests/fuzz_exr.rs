@@ -6,12 +6,12 @@
 
 mod fuzz_support;
 
+use exr::prelude::{read, Blocks, Compression, Encoding, LineOrder, ReadChannels, ReadLayers, Vec2, WritableImage};
 use fuzz_support::*;
 use proptest::prelude::*;
 use proptest::sample::Index;
 use renderer::film::{exr_io, Frame, PixelBuffer};
 use renderer::scene::image_io;
-use exr::prelude::{read, Blocks, Compression, Encoding, LineOrder, ReadChannels, ReadLayers, Vec2, WritableImage};
 use std::path::{Path, PathBuf};
 
 #[global_allocator]
@@ -61,7 +61,8 @@ fn full_frame(dir: &Path) -> PathBuf {
 /// checksum-free decompression when a byte flips, so uncompressed, RLE and tiled copies let the
 /// mutations reach the pixel and offset-table code.
 fn reencode(src: &Path, dst: &Path, compression: Compression, tiled: bool) -> PathBuf {
-    let mut image = read().no_deep_data().largest_resolution_level().all_channels().first_valid_layer().all_attributes().from_file(src).unwrap();
+    let mut image =
+        read().no_deep_data().largest_resolution_level().all_channels().first_valid_layer().all_attributes().from_file(src).unwrap();
     let blocks = if tiled { Blocks::Tiles(Vec2(4, 4)) } else { Blocks::ScanLines };
     image.layer_data.encoding = Encoding { compression, blocks, line_order: LineOrder::Increasing };
     image.write().to_file(dst).unwrap();
@@ -99,21 +100,34 @@ fn fuzz(name: &str, cases: u32, salt: u64, sources: Vec<PathBuf>, read: fn(&Path
     // Half of the edits go to the data window, whose size every allocation follows; one or two
     // words, so that both sides can grow at once.
     let edit = (0..sources.len(), any::<bool>(), any::<Index>(), any::<Index>(), 1..=2usize, prop::sample::select(HOSTILE_I32));
-    run_cases(&format!("{name} (header attributes)"), cases, salt ^ 0x5A, Inputs::Mutated, &edit, |tally, (i, window, attr, word, words, value)| {
-        let mut b = originals[i].clone();
-        let attrs = attributes(&b);
-        let pick = if window { attrs.iter().position(|(n, _, _)| n == "dataWindow").unwrap() } else { attr.index(attrs.len()) };
-        let (attr_name, at, len) = attrs[pick].clone();
-        let at = at + 4 * word.index((len / 4).max(1));
-        for k in 0..words {
-            if at + 4 * k + 4 <= b.len() {
-                b[at + 4 * k..at + 4 * k + 4].copy_from_slice(&value.to_le_bytes());
+    run_cases(
+        &format!("{name} (header attributes)"),
+        cases,
+        salt ^ 0x5A,
+        Inputs::Mutated,
+        &edit,
+        |tally, (i, window, attr, word, words, value)| {
+            let mut b = originals[i].clone();
+            let attrs = attributes(&b);
+            let pick = if window { attrs.iter().position(|(n, _, _)| n == "dataWindow").unwrap() } else { attr.index(attrs.len()) };
+            let (attr_name, at, len) = attrs[pick].clone();
+            let at = at + 4 * word.index((len / 4).max(1));
+            for k in 0..words {
+                if at + 4 * k + 4 <= b.len() {
+                    b[at + 4 * k..at + 4 * k + 4].copy_from_slice(&value.to_le_bytes());
+                }
             }
-        }
-        std::fs::write(&case, &b).unwrap();
-        let p = case.clone();
-        guarded(tally, format!("{} with {words}× {value} in {attr_name} at byte {at}", sources[i].display()), move || if read(&p) { Ok(()) } else { Err(()) })
-    });
+            std::fs::write(&case, &b).unwrap();
+            let p = case.clone();
+            guarded(tally, format!("{} with {words}× {value} in {attr_name} at byte {at}", sources[i].display()), move || {
+                if read(&p) {
+                    Ok(())
+                } else {
+                    Err(())
+                }
+            })
+        },
+    );
     // Arbitrary bytes behind the magic number and a version word, so they reach the header parser.
     let soup = (prop::sample::select(&[2u32, 0x202, 0x402, 0x802, 0x1002][..]), prop::collection::vec(any::<u8>(), 0..2048));
     run_cases(&format!("{name} (arbitrary)"), cases / 2, salt ^ 0xA5, Inputs::Arbitrary, &soup, |tally, (version, bytes)| {
@@ -122,7 +136,11 @@ fn fuzz(name: &str, cases: u32, salt: u64, sources: Vec<PathBuf>, read: fn(&Path
         b.extend_from_slice(&bytes);
         std::fs::write(&case, &b).unwrap();
         let p = case.clone();
-        guarded(tally, format!("{name}: version {version:#x}, {} arbitrary bytes", bytes.len()), move || if read(&p) { Ok(()) } else { Err(()) })
+        guarded(
+            tally,
+            format!("{name}: version {version:#x}, {} arbitrary bytes", bytes.len()),
+            move || if read(&p) { Ok(()) } else { Err(()) },
+        )
     });
 }
 

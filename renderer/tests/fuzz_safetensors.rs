@@ -31,10 +31,7 @@ fn mutated_descriptor_files_read_or_fail_cleanly() {
     });
 
     // A header of arbitrary text under a length that may or may not match it.
-    let header = prop_oneof![
-        prop::collection::vec(any::<u8>(), 0..512),
-        token_soup(SAFETENSORS_TOKENS, 48),
-    ];
+    let header = prop_oneof![prop::collection::vec(any::<u8>(), 0..512), token_soup(SAFETENSORS_TOKENS, 48),];
     let input = (header, any::<bool>(), any::<u64>(), prop::collection::vec(any::<u8>(), 0..256));
     run_cases("descriptors (arbitrary)", 128, 22, Inputs::Arbitrary, &input, |tally, (h, honest, len, data)| {
         let mut b = if honest { (h.len() as u64).to_le_bytes().to_vec() } else { len.to_le_bytes().to_vec() };
@@ -42,13 +39,39 @@ fn mutated_descriptor_files_read_or_fail_cleanly() {
         b.extend_from_slice(&data);
         std::fs::write(&case, &b).unwrap();
         let p = case.clone();
-        guarded(tally, format!("header {:?} (length {}), {} data bytes", String::from_utf8_lossy(&h), if honest { h.len() as u64 } else { len }, data.len()), move || {
-            Descriptors::read_safetensors(&p)
-        })
+        guarded(
+            tally,
+            format!(
+                "header {:?} (length {}), {} data bytes",
+                String::from_utf8_lossy(&h),
+                if honest { h.len() as u64 } else { len },
+                data.len()
+            ),
+            move || Descriptors::read_safetensors(&p),
+        )
     });
 }
 
 const SAFETENSORS_TOKENS: &[&str] = &[
-    "{", "}", "[", "]", ",", ":", "\"descriptors\"", "\"dtype\"", "\"F32\"", "\"F16\"", "\"U8\"", "\"shape\"", "\"data_offsets\"",
-    "\"__metadata__\"", "{\"format\": \"x\"}", "[0, 0]", "[1, 2, 3, 37]", "[0, 4294967296, 1, 37]", "37", "0", "4",
+    "{",
+    "}",
+    "[",
+    "]",
+    ",",
+    ":",
+    "\"descriptors\"",
+    "\"dtype\"",
+    "\"F32\"",
+    "\"F16\"",
+    "\"U8\"",
+    "\"shape\"",
+    "\"data_offsets\"",
+    "\"__metadata__\"",
+    "{\"format\": \"x\"}",
+    "[0, 0]",
+    "[1, 2, 3, 37]",
+    "[0, 4294967296, 1, 37]",
+    "37",
+    "0",
+    "4",
 ];

@@ -37,13 +37,7 @@ fn mirror_scenes(dir: &Path) -> PathBuf {
 
 /// Runs `cases` mutated cases over `sources`: each case writes the mutated bytes to `target(i)`
 /// (a path beside the source's own references) and loads `load_path(i)`.
-fn fuzz_files(
-    name: &str,
-    cases: u32,
-    salt: u64,
-    sources: &[(PathBuf, PathBuf)],
-    load_path: impl Fn(usize) -> PathBuf,
-) {
+fn fuzz_files(name: &str, cases: u32, salt: u64, sources: &[(PathBuf, PathBuf)], load_path: impl Fn(usize) -> PathBuf) {
     let originals: Vec<Vec<u8>> = sources.iter().map(|(s, _)| std::fs::read(s).unwrap()).collect();
     run_cases(name, cases, salt, Inputs::Mutated, &mutated(sources.len()), |tally, (i, edits)| {
         let (source, target) = &sources[i];
@@ -97,10 +91,46 @@ fn mutated_toml_scenes_load_or_fail_cleanly() {
 }
 
 const TOML_TOKENS: &[&str] = &[
-    "\n", "[camera]\n", "[render]\n", "[environment]\n", "[materials.a]\n", "[[shapes]]\n", "position = ", "target = ", "resolution = ",
-    "fov = ", "spp = ", "type = ", "\"diffuse\"", "\"conductor\"", "\"sphere\"", "\"grid\"", "\"lathe\"", "\"heightfield\"", "\"obj\"",
-    "\"map\"", "material = \"a\"", "albedo = ", "emission = ", "segments = ", "count = ", "profile = ", "map = ", "file = ", "[", "]",
-    ", ", "[1, 2, 3]", "[0, 0]", "{ axis = [0, 1, 0], angle = 90 }", "\"", "=", ".", "rotate = ", "scale = ", "matrix = ",
+    "\n",
+    "[camera]\n",
+    "[render]\n",
+    "[environment]\n",
+    "[materials.a]\n",
+    "[[shapes]]\n",
+    "position = ",
+    "target = ",
+    "resolution = ",
+    "fov = ",
+    "spp = ",
+    "type = ",
+    "\"diffuse\"",
+    "\"conductor\"",
+    "\"sphere\"",
+    "\"grid\"",
+    "\"lathe\"",
+    "\"heightfield\"",
+    "\"obj\"",
+    "\"map\"",
+    "material = \"a\"",
+    "albedo = ",
+    "emission = ",
+    "segments = ",
+    "count = ",
+    "profile = ",
+    "map = ",
+    "file = ",
+    "[",
+    "]",
+    ", ",
+    "[1, 2, 3]",
+    "[0, 0]",
+    "{ axis = [0, 1, 0], angle = 90 }",
+    "\"",
+    "=",
+    ".",
+    "rotate = ",
+    "scale = ",
+    "matrix = ",
 ];
 
 #[test]
@@ -156,14 +186,39 @@ fn mutated_obj_and_mtl_load_or_fail_cleanly() {
 }
 
 const OBJ_TOKENS: &[&str] = &[
-    "\n", "v ", "vt ", "vn ", "f ", "o ", "g ", "s 1", "usemtl a", "mtllib m.mtl", "1", "2", "3", "-1", "-4", "/", "//", "1/1/1 ", "0.5 ",
-    " ", "#", "l 1 2", "p 1",
+    "\n",
+    "v ",
+    "vt ",
+    "vn ",
+    "f ",
+    "o ",
+    "g ",
+    "s 1",
+    "usemtl a",
+    "mtllib m.mtl",
+    "1",
+    "2",
+    "3",
+    "-1",
+    "-4",
+    "/",
+    "//",
+    "1/1/1 ",
+    "0.5 ",
+    " ",
+    "#",
+    "l 1 2",
+    "p 1",
 ];
 
 #[test]
 fn arbitrary_obj_fails_cleanly() {
     let dir = scratch("obj_soup");
-    std::fs::write(dir.join("scene.toml"), "[camera]\nposition = [0, 0, 4]\ntarget = [0, 0, 0]\nresolution = [8, 8]\n[[shapes]]\ntype = \"obj\"\nfile = \"mesh.obj\"\n").unwrap();
+    std::fs::write(
+        dir.join("scene.toml"),
+        "[camera]\nposition = [0, 0, 4]\ntarget = [0, 0, 0]\nresolution = [8, 8]\n[[shapes]]\ntype = \"obj\"\nfile = \"mesh.obj\"\n",
+    )
+    .unwrap();
     let mesh = dir.join("mesh.obj");
     let scene = dir.join("scene.toml");
     run_cases("obj soup", 256, 4, Inputs::Arbitrary, &token_soup(OBJ_TOKENS, 128), |tally, bytes| {
@@ -282,10 +337,44 @@ fn mutated_gltf_and_glb_load_or_fail_cleanly() {
 }
 
 const GLTF_TOKENS: &[&str] = &[
-    "{", "}", "[", "]", ",", ":", "\"asset\"", "{\"version\": \"2.0\"}", "\"scenes\"", "\"nodes\"", "\"children\"", "\"mesh\"", "\"meshes\"",
-    "\"primitives\"", "\"attributes\"", "\"POSITION\"", "\"indices\"", "\"accessors\"", "\"bufferViews\"", "\"buffers\"", "\"byteLength\"",
-    "\"count\"", "\"type\"", "\"VEC3\"", "\"SCALAR\"", "\"componentType\"", "5126", "5123", "\"bufferView\"", "\"buffer\"", "\"uri\"",
-    "\"data:application/octet-stream;base64,AAAAAAAAAAAAAAAA\"", "\"scene\"", "0", "1", "\"camera\"", "\"cameras\"", "\"matrix\"",
+    "{",
+    "}",
+    "[",
+    "]",
+    ",",
+    ":",
+    "\"asset\"",
+    "{\"version\": \"2.0\"}",
+    "\"scenes\"",
+    "\"nodes\"",
+    "\"children\"",
+    "\"mesh\"",
+    "\"meshes\"",
+    "\"primitives\"",
+    "\"attributes\"",
+    "\"POSITION\"",
+    "\"indices\"",
+    "\"accessors\"",
+    "\"bufferViews\"",
+    "\"buffers\"",
+    "\"byteLength\"",
+    "\"count\"",
+    "\"type\"",
+    "\"VEC3\"",
+    "\"SCALAR\"",
+    "\"componentType\"",
+    "5126",
+    "5123",
+    "\"bufferView\"",
+    "\"buffer\"",
+    "\"uri\"",
+    "\"data:application/octet-stream;base64,AAAAAAAAAAAAAAAA\"",
+    "\"scene\"",
+    "0",
+    "1",
+    "\"camera\"",
+    "\"cameras\"",
+    "\"matrix\"",
 ];
 
 #[test]
@@ -309,12 +398,38 @@ fn mutated_mitsuba_xml_loads_or_fails_cleanly() {
 }
 
 const XML_TOKENS: &[&str] = &[
-    "<scene version=\"3.0.0\">", "</scene>", "<shape type=\"rectangle\">", "<shape type=\"sphere\">", "<shape type=\"obj\">", "</shape>",
-    "<bsdf type=\"diffuse\" id=\"a\">", "<bsdf type=\"twosided\">", "</bsdf>", "<ref id=\"a\"/>", "<rgb name=\"reflectance\" value=\"",
-    "\"/>", "<float name=\"radius\" value=\"", "<transform name=\"to_world\">", "</transform>", "<scale value=\"", "<matrix value=\"",
-    "<sensor type=\"perspective\">", "</sensor>", "<float name=\"fov\" value=\"", "<film type=\"hdrfilm\">", "</film>",
-    "<integer name=\"width\" value=\"", "<emitter type=\"area\">", "</emitter>", "<emitter type=\"constant\">", "<!--", "-->",
-    "<!DOCTYPE scene [<!ENTITY a \"aaaa\">]>", "&a;", ", ", "\n",
+    "<scene version=\"3.0.0\">",
+    "</scene>",
+    "<shape type=\"rectangle\">",
+    "<shape type=\"sphere\">",
+    "<shape type=\"obj\">",
+    "</shape>",
+    "<bsdf type=\"diffuse\" id=\"a\">",
+    "<bsdf type=\"twosided\">",
+    "</bsdf>",
+    "<ref id=\"a\"/>",
+    "<rgb name=\"reflectance\" value=\"",
+    "\"/>",
+    "<float name=\"radius\" value=\"",
+    "<transform name=\"to_world\">",
+    "</transform>",
+    "<scale value=\"",
+    "<matrix value=\"",
+    "<sensor type=\"perspective\">",
+    "</sensor>",
+    "<float name=\"fov\" value=\"",
+    "<film type=\"hdrfilm\">",
+    "</film>",
+    "<integer name=\"width\" value=\"",
+    "<emitter type=\"area\">",
+    "</emitter>",
+    "<emitter type=\"constant\">",
+    "<!--",
+    "-->",
+    "<!DOCTYPE scene [<!ENTITY a \"aaaa\">]>",
+    "&a;",
+    ", ",
+    "\n",
 ];
 
 #[test]

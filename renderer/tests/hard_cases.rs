@@ -31,7 +31,11 @@ fn lit_floor_with(extra: Vec<(TriMesh, Mat4, renderer::scene::Material)>) -> Sce
     let cam = camera(Vec3::new(0.0, 1.0, 3.0), Vec3::new(0.0, 0.3, 0.0), 45.0, 24, 16);
     let mut shapes = vec![
         (quad(), Mat4::from_rotation_x(-FRAC_PI_2) * Mat4::from_scale(Vec3::splat(3.0)), lambert(0.5)),
-        (quad(), Mat4::from_translation(Vec3::new(0.0, 2.0, 0.0)) * Mat4::from_rotation_x(FRAC_PI_2) * Mat4::from_scale(Vec3::splat(0.3)), emitter(Vec3::splat(10.0))),
+        (
+            quad(),
+            Mat4::from_translation(Vec3::new(0.0, 2.0, 0.0)) * Mat4::from_rotation_x(FRAC_PI_2) * Mat4::from_scale(Vec3::splat(0.3)),
+            emitter(Vec3::splat(10.0)),
+        ),
     ];
     shapes.extend(extra);
     scene(shapes, Environment::Constant(Vec3::splat(0.2)), cam, vec![])
@@ -41,12 +45,23 @@ fn lit_floor_with(extra: Vec<(TriMesh, Mat4, renderer::scene::Material)>) -> Sce
 fn degenerate_and_zero_area_triangles_and_lights() {
     let p = Vec3::new(0.1, 0.5, 0.0);
     let degenerate = TriMesh {
-        positions: vec![p, p, p, Vec3::ZERO, Vec3::X, Vec3::X * 2.0, Vec3::new(0.0, 0.2, 0.0), Vec3::new(1e-30, 0.2, 0.0), Vec3::new(0.0, 0.2, 1e-30)],
+        positions: vec![
+            p,
+            p,
+            p,
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::X * 2.0,
+            Vec3::new(0.0, 0.2, 0.0),
+            Vec3::new(1e-30, 0.2, 0.0),
+            Vec3::new(0.0, 0.2, 1e-30),
+        ],
         normals: vec![],
         uvs: vec![],
         triangles: vec![[0, 1, 2], [3, 4, 5], [6, 7, 8]],
     };
-    let s = lit_floor_with(vec![(degenerate.clone(), Mat4::IDENTITY, lambert(0.5)), (degenerate, Mat4::IDENTITY, emitter(Vec3::splat(100.0)))]);
+    let s =
+        lit_floor_with(vec![(degenerate.clone(), Mat4::IDENTITY, lambert(0.5)), (degenerate, Mat4::IDENTITY, emitter(Vec3::splat(100.0)))]);
     let f = render_clean(&s, 4, 1, 5, BufferRequest::ALL);
     assert!(f.radiance.mean.iter().any(|&v| v > 0.0));
 }
@@ -56,7 +71,12 @@ fn only_a_zero_area_light_gives_a_black_finite_image() {
     let p = Vec3::new(0.0, 1.0, 0.0);
     let tri = TriMesh { positions: vec![p, p, p + Vec3::X], normals: vec![], uvs: vec![], triangles: vec![[0, 1, 2]] };
     let cam = camera(Vec3::new(0.0, 1.0, 3.0), Vec3::ZERO, 45.0, 8, 8);
-    let s = scene(vec![(quad(), Mat4::from_rotation_x(-FRAC_PI_2), lambert(0.5)), (tri, Mat4::IDENTITY, emitter(Vec3::ONE))], Environment::Constant(Vec3::ZERO), cam, vec![]);
+    let s = scene(
+        vec![(quad(), Mat4::from_rotation_x(-FRAC_PI_2), lambert(0.5)), (tri, Mat4::IDENTITY, emitter(Vec3::ONE))],
+        Environment::Constant(Vec3::ZERO),
+        cam,
+        vec![],
+    );
     let f = render_clean(&s, 4, 1, 5, BufferRequest::ALL);
     assert!(f.radiance.mean.iter().all(|&v| v == 0.0));
 }
@@ -65,7 +85,10 @@ fn only_a_zero_area_light_gives_a_black_finite_image() {
 fn camera_inside_a_closed_mesh() {
     let cam = camera(Vec3::ZERO, Vec3::new(0.0, 0.0, -1.0), 90.0, 16, 16);
     let s = scene(
-        vec![(cube(), Mat4::IDENTITY, lambert(0.8)), (sphere(0.2, 12), Mat4::from_translation(Vec3::new(0.0, 0.5, -0.5)), emitter(Vec3::splat(5.0)))],
+        vec![
+            (cube(), Mat4::IDENTITY, lambert(0.8)),
+            (sphere(0.2, 12), Mat4::from_translation(Vec3::new(0.0, 0.5, -0.5)), emitter(Vec3::splat(5.0))),
+        ],
         Environment::Constant(Vec3::ONE),
         cam,
         vec![],
@@ -81,10 +104,28 @@ fn extreme_material_parameters() {
         MaterialKind::Dielectric { ior: 1.0, roughness: 0.5, tint: Vec3::ONE, dist: Default::default() },
         MaterialKind::Dielectric { ior: 1.5, roughness: 1.0, tint: Vec3::ONE, dist: Default::default() },
         MaterialKind::Dielectric { ior: 2.4, roughness: 1e-4, tint: Vec3::ONE, dist: Default::default() },
-        MaterialKind::Conductor { eta: Vec3::splat(0.2), k: Vec3::splat(3.0), roughness: 0.0, specular_tint: ColorParam::Const(Vec3::ONE), dist: Default::default() },
-        MaterialKind::Conductor { eta: Vec3::splat(0.2), k: Vec3::splat(3.0), roughness: 1.0, specular_tint: ColorParam::Const(Vec3::ONE), dist: Default::default() },
+        MaterialKind::Conductor {
+            eta: Vec3::splat(0.2),
+            k: Vec3::splat(3.0),
+            roughness: 0.0,
+            specular_tint: ColorParam::Const(Vec3::ONE),
+            dist: Default::default(),
+        },
+        MaterialKind::Conductor {
+            eta: Vec3::splat(0.2),
+            k: Vec3::splat(3.0),
+            roughness: 1.0,
+            specular_tint: ColorParam::Const(Vec3::ONE),
+            dist: Default::default(),
+        },
         MaterialKind::Plastic { albedo: ColorParam::Const(Vec3::ONE), ior: 1.5, roughness: 0.0, dist: Default::default(), nonlinear: true },
-        MaterialKind::Plastic { albedo: ColorParam::Const(Vec3::ZERO), ior: 1.5, roughness: 1.0, dist: Default::default(), nonlinear: true },
+        MaterialKind::Plastic {
+            albedo: ColorParam::Const(Vec3::ZERO),
+            ior: 1.5,
+            roughness: 1.0,
+            dist: Default::default(),
+            nonlinear: true,
+        },
         MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::ZERO) },
     ];
     for (k, kind) in mats.into_iter().enumerate() {
@@ -115,7 +156,14 @@ fn grazing_rays_along_a_plane() {
     // The camera sits exactly in the plane of a quad: every ray grazes or misses it.
     let cam = camera(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 30.0, 16, 16);
     let s = scene(
-        vec![(quad(), Mat4::from_rotation_x(-FRAC_PI_2), lambert(0.5)), (quad(), Mat4::from_rotation_x(-FRAC_PI_2) * Mat4::from_translation(Vec3::new(0.0, 0.0, 1e-6)), with_kind(MaterialKind::Dielectric { ior: 1.5, roughness: 0.0, tint: Vec3::ONE, dist: Default::default() }))],
+        vec![
+            (quad(), Mat4::from_rotation_x(-FRAC_PI_2), lambert(0.5)),
+            (
+                quad(),
+                Mat4::from_rotation_x(-FRAC_PI_2) * Mat4::from_translation(Vec3::new(0.0, 0.0, 1e-6)),
+                with_kind(MaterialKind::Dielectric { ior: 1.5, roughness: 0.0, tint: Vec3::ONE, dist: Default::default() }),
+            ),
+        ],
         Environment::Constant(Vec3::ONE),
         cam,
         vec![],
@@ -159,7 +207,13 @@ fn scales_from_a_millimetre_to_ten_kilometres() {
         let s = scene(
             vec![
                 (cube(), Mat4::from_scale(Vec3::splat(scale)), lambert(0.5)),
-                (quad(), Mat4::from_translation(Vec3::new(0.0, 0.99, 0.0) * scale) * Mat4::from_rotation_x(FRAC_PI_2) * Mat4::from_scale(Vec3::splat(0.3 * scale)), emitter(Vec3::splat(5.0))),
+                (
+                    quad(),
+                    Mat4::from_translation(Vec3::new(0.0, 0.99, 0.0) * scale)
+                        * Mat4::from_rotation_x(FRAC_PI_2)
+                        * Mat4::from_scale(Vec3::splat(0.3 * scale)),
+                    emitter(Vec3::splat(5.0)),
+                ),
             ],
             // A bright outside: any leak through the walls would brighten the image.
             Environment::Constant(Vec3::splat(100.0)),

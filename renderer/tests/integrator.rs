@@ -78,10 +78,30 @@ fn convergence_is_one_over_spp() {
     let box_ = vec![
         (quad(), Mat4::from_translation(Vec3::new(0.0, 0.0, 0.0)) * Mat4::from_rotation_x(-std::f32::consts::FRAC_PI_2), lambert(0.7)),
         (quad(), Mat4::from_translation(Vec3::new(0.0, 1.0, -1.0)), lambert(0.7)),
-        (quad(), Mat4::from_translation(Vec3::new(-1.0, 1.0, 0.0)) * Mat4::from_rotation_y(std::f32::consts::FRAC_PI_2), with_kind(MaterialKind::Lambert { albedo: renderer::scene::ColorParam::Const(Vec3::new(0.7, 0.1, 0.1)) })),
+        (
+            quad(),
+            Mat4::from_translation(Vec3::new(-1.0, 1.0, 0.0)) * Mat4::from_rotation_y(std::f32::consts::FRAC_PI_2),
+            with_kind(MaterialKind::Lambert { albedo: renderer::scene::ColorParam::Const(Vec3::new(0.7, 0.1, 0.1)) }),
+        ),
         (quad(), Mat4::from_translation(Vec3::new(0.0, 2.0, 0.0)) * Mat4::from_rotation_x(std::f32::consts::FRAC_PI_2), lambert(0.7)),
-        (quad(), Mat4::from_translation(Vec3::new(0.0, 1.99, 0.0)) * Mat4::from_rotation_x(std::f32::consts::FRAC_PI_2) * Mat4::from_scale(Vec3::splat(0.3)), emitter(Vec3::splat(15.0))),
-        (cube(), Mat4::from_translation(Vec3::new(0.3, 0.3, -0.2)) * Mat4::from_scale(Vec3::splat(0.3)), with_kind(MaterialKind::Conductor { eta: Vec3::new(0.2, 0.9, 1.1), k: Vec3::new(3.9, 2.4, 2.2), roughness: 0.2, specular_tint: renderer::scene::ColorParam::Const(Vec3::ONE), dist: Default::default() })),
+        (
+            quad(),
+            Mat4::from_translation(Vec3::new(0.0, 1.99, 0.0))
+                * Mat4::from_rotation_x(std::f32::consts::FRAC_PI_2)
+                * Mat4::from_scale(Vec3::splat(0.3)),
+            emitter(Vec3::splat(15.0)),
+        ),
+        (
+            cube(),
+            Mat4::from_translation(Vec3::new(0.3, 0.3, -0.2)) * Mat4::from_scale(Vec3::splat(0.3)),
+            with_kind(MaterialKind::Conductor {
+                eta: Vec3::new(0.2, 0.9, 1.1),
+                k: Vec3::new(3.9, 2.4, 2.2),
+                roughness: 0.2,
+                specular_tint: renderer::scene::ColorParam::Const(Vec3::ONE),
+                dist: Default::default(),
+            }),
+        ),
     ];
     let s = scene(box_, Environment::Constant(Vec3::splat(0.2)), cam, vec![]);
     let reference = render(&s, 4096, 999, 5, BufferRequest::RADIANCE_ONLY);
@@ -106,9 +126,31 @@ fn same_seed_same_bytes_on_one_and_two_threads() {
     let cam = camera(Vec3::new(0.0, 0.5, 3.0), Vec3::ZERO, 45.0, 40, 24);
     let s = scene(
         vec![
-            (sphere(0.5, 24), Mat4::IDENTITY, with_kind(MaterialKind::Plastic { albedo: renderer::scene::ColorParam::Const(Vec3::new(0.2, 0.5, 0.8)), ior: 1.5, roughness: 0.1, dist: Default::default(), nonlinear: true })),
-            (quad(), Mat4::from_translation(Vec3::new(0.0, -0.5, 0.0)) * Mat4::from_rotation_x(-std::f32::consts::FRAC_PI_2) * Mat4::from_scale(Vec3::splat(3.0)), lambert(0.5)),
-            (quad(), Mat4::from_translation(Vec3::new(0.0, 2.0, 0.0)) * Mat4::from_rotation_x(std::f32::consts::FRAC_PI_2) * Mat4::from_scale(Vec3::splat(0.5)), emitter(Vec3::splat(8.0))),
+            (
+                sphere(0.5, 24),
+                Mat4::IDENTITY,
+                with_kind(MaterialKind::Plastic {
+                    albedo: renderer::scene::ColorParam::Const(Vec3::new(0.2, 0.5, 0.8)),
+                    ior: 1.5,
+                    roughness: 0.1,
+                    dist: Default::default(),
+                    nonlinear: true,
+                }),
+            ),
+            (
+                quad(),
+                Mat4::from_translation(Vec3::new(0.0, -0.5, 0.0))
+                    * Mat4::from_rotation_x(-std::f32::consts::FRAC_PI_2)
+                    * Mat4::from_scale(Vec3::splat(3.0)),
+                lambert(0.5),
+            ),
+            (
+                quad(),
+                Mat4::from_translation(Vec3::new(0.0, 2.0, 0.0))
+                    * Mat4::from_rotation_x(std::f32::consts::FRAC_PI_2)
+                    * Mat4::from_scale(Vec3::splat(0.5)),
+                emitter(Vec3::splat(8.0)),
+            ),
         ],
         Environment::Constant(Vec3::splat(0.1)),
         cam,

@@ -111,11 +111,17 @@ fn unknown_elements_and_types_name_file_line_and_element() {
     assert!(e.contains("scene.xml") && e.contains("line 5") && e.contains("<volume") && e.contains("unsupported element"), "{e}");
     let e = load_err("bsdf", "<scene version=\"0.5.0\">\n<bsdf type=\"hair\" id=\"h\"/>\n</scene>");
     assert!(e.contains("line 2") && e.contains("hair"), "{e}");
-    let e = load_err("param", "<scene version=\"0.5.0\">\n<bsdf type=\"diffuse\" id=\"d\">\n  <float name=\"sheen\" value=\"1\"/>\n</bsdf>\n</scene>");
+    let e = load_err(
+        "param",
+        "<scene version=\"0.5.0\">\n<bsdf type=\"diffuse\" id=\"d\">\n  <float name=\"sheen\" value=\"1\"/>\n</bsdf>\n</scene>",
+    );
     assert!(e.contains("line 3") && e.contains("sheen"), "{e}");
     let e = load_err("ref", "<scene version=\"0.5.0\">\n<shape type=\"cube\">\n  <ref id=\"nope\"/>\n</shape>\n</scene>");
     assert!(e.contains("line 3") && e.contains("nope"), "{e}");
-    let e = load_err("metal", "<scene version=\"0.5.0\">\n<bsdf type=\"conductor\" id=\"c\"><string name=\"material\" value=\"Unobtainium\"/></bsdf>\n</scene>");
+    let e = load_err(
+        "metal",
+        "<scene version=\"0.5.0\">\n<bsdf type=\"conductor\" id=\"c\"><string name=\"material\" value=\"Unobtainium\"/></bsdf>\n</scene>",
+    );
     assert!(e.contains("line 2") && e.contains("Unobtainium"), "{e}");
 }
 
@@ -164,7 +170,10 @@ fn defaults_refs_primitives_and_emitters() {
     assert!(d.camera.forward.dot(-Vec3::Z) > 0.99999);
     assert_eq!((d.camera.width, d.camera.height), (64, 32));
 
-    let e = load_err("nodefault", "<scene version=\"0.5.0\">\n<bsdf type=\"diffuse\" id=\"d\"><float name=\"reflectance\" value=\"$missing\"/></bsdf>\n</scene>");
+    let e = load_err(
+        "nodefault",
+        "<scene version=\"0.5.0\">\n<bsdf type=\"diffuse\" id=\"d\"><float name=\"reflectance\" value=\"$missing\"/></bsdf>\n</scene>",
+    );
     assert!(e.contains("line 2") && e.contains("$missing"), "{e}");
 }
 
@@ -296,7 +305,9 @@ fn checkerboard_is_color0_at_the_uv_origin_and_alternates_each_half_period() {
     let new = r#"<texture type="checkerboard" name="reflectance"><rgb name="color0" value="0.8, 0.7, 0.6"/><rgb name="color1" value="0.1, 0.2, 0.3"/>
         <transform name="to_uv"><scale x="4" y="2"/><translate x="0.25"/></transform></texture>"#;
     for (label, tex) in [("old", old), ("new", new)] {
-        let xml = format!(r#"<scene version="0.5.0">{CAMERA}<bsdf type="diffuse" id="d">{tex}</bsdf><shape type="rectangle"><ref id="d"/></shape></scene>"#);
+        let xml = format!(
+            r#"<scene version="0.5.0">{CAMERA}<bsdf type="diffuse" id="d">{tex}</bsdf><shape type="rectangle"><ref id="d"/></shape></scene>"#
+        );
         let d = load_xml(&format!("checker-{label}"), &xml).unwrap_or_else(|e| panic!("{e}"));
         let albedo = match &d.materials[0].kind {
             MaterialKind::Lambert { albedo } => albedo.clone(),
@@ -340,7 +351,8 @@ fn conductor_with_a_constant_texture_renders_like_the_same_rgb() {
     image::DynamicImage::ImageRgb32F(image::Rgb32FImage::from_pixel(2, 2, image::Rgb(c))).save(&exr).unwrap();
     let rgb = r#"<rgb name="specularReflectance" value="0.9, 0.6, 0.3"/>"#.to_string();
     let checker = r#"<texture type="checkerboard" name="specular_reflectance"><rgb name="color0" value="0.9, 0.6, 0.3"/><rgb name="color1" value="0.9 0.6 0.3"/><float name="uscale" value="7"/></texture>"#.to_string();
-    let bitmap = format!(r#"<texture type="bitmap" name="specular_reflectance"><string name="filename" value="{}"/></texture>"#, exr.display());
+    let bitmap =
+        format!(r#"<texture type="bitmap" name="specular_reflectance"><string name="filename" value="{}"/></texture>"#, exr.display());
     for bsdf in ["conductor", "roughconductor"] {
         let want = furnace(&format!("furnace-{bsdf}-rgb"), bsdf, &rgb);
         for (label, tex) in [("checkerboard", &checker), ("bitmap", &bitmap)] {
@@ -352,7 +364,8 @@ fn conductor_with_a_constant_texture_renders_like_the_same_rgb() {
             // environment once through the sphere, F · tint, F = 1 for the mirror `none`
             // (k = 10⁴: 1 − F ≈ 4e-8).
             let f = 1.0;
-            let central = want.radiance.mean.chunks(3).enumerate().filter(|(i, _)| (6..18).contains(&(i % 24)) && (6..18).contains(&(i / 24)));
+            let central =
+                want.radiance.mean.chunks(3).enumerate().filter(|(i, _)| (6..18).contains(&(i % 24)) && (6..18).contains(&(i / 24)));
             for (_, px) in central {
                 for k in 0..3 {
                     assert!((px[k] - f * c[k]).abs() < 2e-3, "pixel {px:?} vs {:?}", c.map(|x| x * f));
@@ -372,8 +385,14 @@ fn conductor_with_a_constant_texture_renders_like_the_same_rgb() {
 fn bad_texture_references_name_the_file_and_field() {
     let metal = |tex: &str| format!("<scene version=\"0.5.0\">\n<bsdf type=\"roughconductor\" id=\"m\">\n{tex}\n</bsdf>\n</scene>");
     // A missing image: the scene file, the texture's line, the BSDF parameter and the image path.
-    let e = load_err("tex-missing", &metal(r#"<texture type="bitmap" name="specular_reflectance"><string name="filename" value="no-such-image.png"/></texture>"#));
-    assert!(e.contains("scene.xml") && e.contains("line 3") && e.contains("specular_reflectance") && e.contains("no-such-image.png"), "{e}");
+    let e = load_err(
+        "tex-missing",
+        &metal(r#"<texture type="bitmap" name="specular_reflectance"><string name="filename" value="no-such-image.png"/></texture>"#),
+    );
+    assert!(
+        e.contains("scene.xml") && e.contains("line 3") && e.contains("specular_reflectance") && e.contains("no-such-image.png"),
+        "{e}"
+    );
     // An unknown texture type.
     let e = load_err("tex-type", &metal(r#"<texture type="gradient" name="specularReflectance"/>"#));
     assert!(e.contains("scene.xml") && e.contains("line 3") && e.contains("specularReflectance") && e.contains("\"gradient\""), "{e}");
@@ -383,9 +402,15 @@ fn bad_texture_references_name_the_file_and_field() {
     // A bitmap without a file name, an unknown checkerboard parameter, a textured colour.
     let e = load_err("tex-nofile", &metal(r#"<texture type="bitmap" name="specular_reflectance"/>"#));
     assert!(e.contains("line 3") && e.contains("specular_reflectance") && e.contains("filename"), "{e}");
-    let e = load_err("tex-param", &metal("<texture type=\"checkerboard\" name=\"specular_reflectance\">\n<float name=\"blur\" value=\"1\"/></texture>"));
+    let e = load_err(
+        "tex-param",
+        &metal("<texture type=\"checkerboard\" name=\"specular_reflectance\">\n<float name=\"blur\" value=\"1\"/></texture>"),
+    );
     assert!(e.contains("line 4") && e.contains("blur") && e.contains("specular_reflectance"), "{e}");
-    let e = load_err("tex-nested", &metal(r#"<texture type="checkerboard" name="specular_reflectance"><texture type="bitmap" name="color0"/></texture>"#));
+    let e = load_err(
+        "tex-nested",
+        &metal(r#"<texture type="checkerboard" name="specular_reflectance"><texture type="bitmap" name="color0"/></texture>"#),
+    );
     assert!(e.contains("color0") && e.contains("constant colour"), "{e}");
     // The same missing image as a top-level texture referenced by a diffuse BSDF.
     let e = load_err(
@@ -410,7 +435,11 @@ fn strict_loading_refuses_substitutions_by_line() {
         )
     };
     let aniso = dir.join("aniso.xml");
-    std::fs::write(&aniso, scene(r#"<bsdf type="roughconductor"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.4"/></bsdf>"#)).unwrap();
+    std::fs::write(
+        &aniso,
+        scene(r#"<bsdf type="roughconductor"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.4"/></bsdf>"#),
+    )
+    .unwrap();
     let plain = dir.join("plain.xml");
     std::fs::write(&plain, scene(r#"<bsdf type="roughconductor"><float name="alpha" value="0.2"/></bsdf>"#)).unwrap();
     assert!(Scene::load(&aniso).is_ok(), "a substitution is only a warning by default");

@@ -24,10 +24,10 @@ use renderer::film::BufferRequest;
 use renderer::integrator::{self, RenderOptions};
 use renderer::scene::{export_mitsuba, Scene};
 use renderer::stats::{sidak, t_threshold, t_two_sided_p};
-use tools_venv::{mitsuba_python, MITSUBA};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use tools_venv::{mitsuba_python, MITSUBA};
 
 /// Family-wise significance of each of the three tests of a scene. The renders are
 /// deterministic (fixed seeds on both sides), so a pass or a failure is reproducible; ALPHA says
@@ -70,7 +70,15 @@ fn render_ours(case: &Case) -> Image {
     // A new size keeps the field of view along the scene's fov axis, as Mitsuba's film does.
     scene.camera.width = case.width;
     scene.camera.height = case.height;
-    let opts = RenderOptions { spp: case.spp, seed: 1, max_bounces: case.max_depth - 1, russian_roulette: false, request: BufferRequest::default(), crop: None, first_sample: 0 };
+    let opts = RenderOptions {
+        spp: case.spp,
+        seed: 1,
+        max_bounces: case.max_depth - 1,
+        russian_roulette: false,
+        request: BufferRequest::default(),
+        crop: None,
+        first_sample: 0,
+    };
     let (frame, stats) = integrator::render(&scene, &opts, &|_| {}).unwrap_or_else(|e| panic!("{}: {e}", case.name));
     assert_eq!(frame.nonfinite_samples, 0, "{}: non-finite samples", case.name);
     Image {
@@ -89,7 +97,14 @@ fn render_mitsuba(python: &Path, xml: &Path, case: &Case, out_dir: &Path) -> Ima
     let script = workspace().join("tools/mitsuba/render.py");
     let spp = case.spp / SEEDS;
     let args = [case.width, case.height, spp, SEEDS, case.max_depth].map(|v| v.to_string());
-    let o = Command::new(python).arg(&script).arg(xml).arg(&out).args(&args).arg(&exr).output().unwrap_or_else(|e| panic!("{}: {e}", script.display()));
+    let o = Command::new(python)
+        .arg(&script)
+        .arg(xml)
+        .arg(&out)
+        .args(&args)
+        .arg(&exr)
+        .output()
+        .unwrap_or_else(|e| panic!("{}: {e}", script.display()));
     assert!(o.status.success(), "{}: Mitsuba failed on {}:\n{}", case.name, xml.display(), String::from_utf8_lossy(&o.stderr));
     let data = std::fs::read(&out).unwrap();
     assert_eq!(&data[..8], b"PGMI0001");
@@ -259,7 +274,10 @@ fn check_case(python: &Path, case: &Case, out_dir: &Path) -> (String, Vec<String
         )
         .unwrap();
         if r.p < p_mean {
-            failures.push(format!("{}: image mean of channel {c} differs: ours {:.5}, Mitsuba {:.5}, t = {:.2}", case.name, r.ours, r.theirs, r.t));
+            failures.push(format!(
+                "{}: image mean of channel {c} differs: ours {:.5}, Mitsuba {:.5}, t = {:.2}",
+                case.name, r.ours, r.theirs, r.t
+            ));
         }
     }
     for (label, block, f) in [("8x8 blocks", 8u32, family(&ours, &theirs, 8)), ("pixels", 1, pixels)] {
@@ -305,10 +323,19 @@ fn check_case(python: &Path, case: &Case, out_dir: &Path) -> (String, Vec<String
 fn cases() -> Vec<Case> {
     let ws = workspace();
     let xml = |name: &str| ws.join(format!("renderer/tests/mitsuba-scenes/{name}.xml"));
-    let own = |name: &'static str, width, height, spp| Case { name, ours: xml(name), mitsuba: Some(xml(name)), width, height, spp, max_depth: 6 };
+    let own =
+        |name: &'static str, width, height, spp| Case { name, ours: xml(name), mitsuba: Some(xml(name)), width, height, spp, max_depth: 6 };
     let veach = ws.join("scenes/assets/veach-ajar/scene.xml");
     vec![
-        Case { name: "cornell-box", ours: ws.join("scenes/cornell-box/scene.toml"), mitsuba: None, width: 48, height: 48, spp: 512, max_depth: 6 },
+        Case {
+            name: "cornell-box",
+            ours: ws.join("scenes/cornell-box/scene.toml"),
+            mitsuba: None,
+            width: 48,
+            height: 48,
+            spp: 512,
+            max_depth: 6,
+        },
         Case { name: "veach-ajar", ours: veach.clone(), mitsuba: Some(veach), width: 64, height: 36, spp: 512, max_depth: 6 },
         own("metals", 48, 48, 512),
         own("glass", 48, 48, 512),
@@ -319,9 +346,8 @@ fn cases() -> Vec<Case> {
 #[test]
 fn matches_mitsuba_pixel_by_pixel() {
     let venv = workspace().join("target/mitsuba-venv");
-    let v = mitsuba_python(&venv).unwrap_or_else(|e| {
-        panic!("the Mitsuba cross-check needs python3 -m venv and `pip install {MITSUBA} numpy` (PyPI) to work: {e}")
-    });
+    let v = mitsuba_python(&venv)
+        .unwrap_or_else(|e| panic!("the Mitsuba cross-check needs python3 -m venv and `pip install {MITSUBA} numpy` (PyPI) to work: {e}"));
     println!("Mitsuba {} (scalar_rgb), family-wise alpha {ALPHA} per test and scene", v.probe);
     let out_dir = workspace().join("target/mitsuba-crosscheck");
     std::fs::create_dir_all(&out_dir).unwrap();

@@ -195,7 +195,11 @@ fn primitive_triangle_counts_normals_and_areas() {
 fn shape_transforms_apply_in_scale_rotate_translate_order_and_match_matrix() {
     let dir = scratch("transforms");
     let trs = "scale = [1, 2, 3]\nrotate = { axis = [0, 0, 1], angle = 90 }\ntranslate = [10, 0, 0]\n";
-    let p = write(&dir, "trs.toml", &format!("{CAMERA}[materials.m]\ntype = \"diffuse\"\n[[shapes]]\ntype = \"cube\"\nmaterial = \"m\"\n{trs}"));
+    let p = write(
+        &dir,
+        "trs.toml",
+        &format!("{CAMERA}[materials.m]\ntype = \"diffuse\"\n[[shapes]]\ntype = \"cube\"\nmaterial = \"m\"\n{trs}"),
+    );
     let d = load(&p);
     let (lo, hi) = d.mesh.bounds();
     // Scale gives x∈[-1,1], y∈[-2,2], z∈[-3,3]; 90° about Z maps (x,y) → (−y,x): x∈[-2,2], y∈[-1,1]; then +10 in x.
@@ -210,19 +214,34 @@ fn shape_transforms_apply_in_scale_rotate_translate_order_and_match_matrix() {
         * Mat4::from_rotation_z(90f32.to_radians())
         * Mat4::from_scale(Vec3::new(1.0, 2.0, 3.0));
     let rows: Vec<String> = (0..4).map(|r| format!("{:?}", m.row(r).to_array())).collect();
-    let p2 = write(&dir, "matrix.toml", &format!("{CAMERA}[materials.m]\ntype = \"diffuse\"\n[[shapes]]\ntype = \"cube\"\nmaterial = \"m\"\nmatrix = [{}]\n", rows.join(", ")));
+    let p2 = write(
+        &dir,
+        "matrix.toml",
+        &format!(
+            "{CAMERA}[materials.m]\ntype = \"diffuse\"\n[[shapes]]\ntype = \"cube\"\nmaterial = \"m\"\nmatrix = [{}]\n",
+            rows.join(", ")
+        ),
+    );
     let d2 = load(&p2);
     for (a, b) in d.mesh.positions.iter().zip(&d2.mesh.positions) {
         assert!((*a - *b).length() < 1e-5);
     }
 
     // Euler degrees: [0, 90, 0] turns the +Z-facing quad to face +X.
-    let p3 = write(&dir, "euler.toml", &format!("{CAMERA}[materials.m]\ntype = \"diffuse\"\n[[shapes]]\ntype = \"quad\"\nmaterial = \"m\"\nrotate = [0, 90, 0]\n"));
+    let p3 = write(
+        &dir,
+        "euler.toml",
+        &format!("{CAMERA}[materials.m]\ntype = \"diffuse\"\n[[shapes]]\ntype = \"quad\"\nmaterial = \"m\"\nrotate = [0, 90, 0]\n"),
+    );
     let d3 = load(&p3);
     assert!(d3.mesh.geometric_normal(0).dot(Vec3::X) > 0.9999);
 
     // A mirroring scale keeps the winding normal outward (emission side).
-    let p4 = write(&dir, "mirror.toml", &format!("{CAMERA}[materials.m]\ntype = \"diffuse\"\n[[shapes]]\ntype = \"quad\"\nmaterial = \"m\"\nscale = [-1, 1, 1]\n"));
+    let p4 = write(
+        &dir,
+        "mirror.toml",
+        &format!("{CAMERA}[materials.m]\ntype = \"diffuse\"\n[[shapes]]\ntype = \"quad\"\nmaterial = \"m\"\nscale = [-1, 1, 1]\n"),
+    );
     assert!(load(&p4).mesh.geometric_normal(0).dot(Vec3::Z) > 0.9999);
 }
 
@@ -256,7 +275,9 @@ fn textured_material_reads_the_texture_in_linear_colour() {
     assert!((t.texel(1, 0) - expect([200, 150, 0])).length() < 1e-6);
     assert!((t.texel(0, 1) - expect([20, 0, 90])).length() < 1e-6);
     let m = &d.materials[d.mesh.material[0] as usize];
-    assert!(matches!(m.kind, MaterialKind::Lambert { albedo: ColorParam::Texture { index: 0, scale, .. } } if scale == Vec3::new(0.5, 1.0, 1.0)));
+    assert!(
+        matches!(m.kind, MaterialKind::Lambert { albedo: ColorParam::Texture { index: 0, scale, .. } } if scale == Vec3::new(0.5, 1.0, 1.0))
+    );
     // At the centre of the top-left texel the BSDF sees that texel times the albedo scale.
     match m.bsdf(Vec2::new(0.25, 0.25), &d.textures) {
         Bsdf::Lambert { albedo } => assert!((albedo - expect([200, 100, 0]) * Vec3::new(0.5, 1.0, 1.0)).length() < 1e-6),
@@ -297,7 +318,9 @@ fn missing_mtl_gives_grey_diffuse_not_an_error() {
     let p = write(&dir, "scene.toml", &format!("{CAMERA}[[shapes]]\ntype = \"obj\"\nfile = \"mesh.obj\"\n"));
     let d = load(&p);
     assert_eq!(d.mesh.triangles.len(), 1);
-    assert!(matches!(d.materials[d.mesh.material[0] as usize].kind, MaterialKind::Lambert { albedo: ColorParam::Const(c) } if c == Vec3::splat(0.5)));
+    assert!(
+        matches!(d.materials[d.mesh.material[0] as usize].kind, MaterialKind::Lambert { albedo: ColorParam::Const(c) } if c == Vec3::splat(0.5))
+    );
 }
 
 #[test]
@@ -380,7 +403,8 @@ fn quad_buffer() -> (Vec<u8>, [usize; 4]) {
 /// 2 holding the mesh twice (one primitive per material), and optionally a camera node.
 fn gltf_json(buffer_uri: &str, buffer_len: usize, offs: [usize; 4], png_uri: &str, with_camera: bool) -> String {
     let camera_node = if with_camera { r#",{"camera":0,"translation":[0,0.5,3]}"# } else { "" };
-    let cameras = if with_camera { r#""cameras":[{"type":"perspective","perspective":{"yfov":0.7,"aspectRatio":2.0,"znear":0.1}}],"# } else { "" };
+    let cameras =
+        if with_camera { r#""cameras":[{"type":"perspective","perspective":{"yfov":0.7,"aspectRatio":2.0,"znear":0.1}}],"# } else { "" };
     let scene_nodes = if with_camera { "[0,2]" } else { "[0]" };
     format!(
         r#"{{
@@ -428,11 +452,15 @@ fn check_gltf_quad_scene(d: &SceneDescription, offset: Vec3) {
     assert!((hi - (offset + Vec3::new(2.0, 2.0, -2.0))).length() < 1e-5, "{hi}");
     let by_name = |n: &str| d.materials.iter().find(|m| m.name == n).unwrap_or_else(|| panic!("no material {n}"));
     let painted = by_name("painted");
-    assert!(matches!(painted.kind, MaterialKind::Lambert { albedo: ColorParam::Texture { scale, .. } } if scale == Vec3::new(1.0, 0.5, 0.5)));
+    assert!(
+        matches!(painted.kind, MaterialKind::Lambert { albedo: ColorParam::Texture { scale, .. } } if scale == Vec3::new(1.0, 0.5, 0.5))
+    );
     let lamp = by_name("lamp");
     assert!((lamp.emission - Vec3::new(4.0, 2.0, 1.0)).length() < 1e-6);
     assert!(lamp.two_sided_emission);
-    assert!(matches!(lamp.kind, MaterialKind::Conductor { roughness, specular_tint: ColorParam::Const(specular_tint), .. } if (roughness - 0.25).abs() < 1e-6 && (specular_tint - Vec3::new(0.9, 0.8, 0.1)).length() < 1e-6));
+    assert!(
+        matches!(lamp.kind, MaterialKind::Conductor { roughness, specular_tint: ColorParam::Const(specular_tint), .. } if (roughness - 0.25).abs() < 1e-6 && (specular_tint - Vec3::new(0.9, 0.8, 0.1)).length() < 1e-6)
+    );
     assert!(matches!(by_name("glass").kind, MaterialKind::Dielectric { ior, .. } if ior == 1.5));
     // The base colour texture (a 1×1 green PNG) decoded to linear.
     assert_eq!(d.textures.len(), 1);
@@ -517,7 +545,11 @@ fn gltf_with_out_of_range_accessor_is_an_error_not_a_panic() {
     let uri = format!("data:application/octet-stream;base64,{}", base64(&buf));
     let png = format!("data:image/png;base64,{}", base64(&png_bytes()));
     // Claim 400 vertices in a buffer holding 4.
-    let json = gltf_json(&uri, buf.len(), offs, &png, true).replacen(r#""count": 4, "type": "VEC3", "min""#, r#""count": 400, "type": "VEC3", "min""#, 1);
+    let json = gltf_json(&uri, buf.len(), offs, &png, true).replacen(
+        r#""count": 4, "type": "VEC3", "min""#,
+        r#""count": 400, "type": "VEC3", "min""#,
+        1,
+    );
     let p = write(&dir, "broken.gltf", &json);
     let msg = match load_description(&p) {
         Ok(_) => panic!("loaded"),
@@ -563,7 +595,11 @@ fn unknown_fields_are_errors() {
 #[test]
 fn missing_mesh_and_texture_files_name_the_path_and_field() {
     let dir = scratch("err_missing");
-    let p = scene_with(&dir, "mesh.toml", &format!("{CAMERA}{QUAD}[[shapes]]\ntype = \"quad\"\nmaterial = \"m\"\n[[shapes]]\ntype = \"obj\"\nfile = \"nothere.obj\"\n"));
+    let p = scene_with(
+        &dir,
+        "mesh.toml",
+        &format!("{CAMERA}{QUAD}[[shapes]]\ntype = \"quad\"\nmaterial = \"m\"\n[[shapes]]\ntype = \"obj\"\nfile = \"nothere.obj\"\n"),
+    );
     expect_error(&p, &["shapes[2].file", "nothere.obj"]);
     let p = scene_with(&dir, "gltf.toml", &format!("{CAMERA}[[shapes]]\ntype = \"gltf\"\nfile = \"nothere.glb\"\n"));
     expect_error(&p, &["shapes[0].file", "nothere.glb"]);
@@ -591,14 +627,22 @@ fn non_finite_and_negative_values_name_the_field() {
         ("rough_neg.toml", format!("{CAMERA}[materials.m]\ntype = \"plastic\"\nroughness = -0.1\n"), "materials.m.roughness"),
         ("ior_zero.toml", format!("{CAMERA}[materials.m]\ntype = \"dielectric\"\nior = 0\n"), "materials.m.ior"),
         ("emit_neg.toml", format!("{CAMERA}[materials.m]\ntype = \"diffuse\"\nemission = [1, -1, 1]\n"), "materials.m.emission"),
-        ("strength_nan.toml", format!("{CAMERA}[materials.m]\ntype = \"diffuse\"\nemission = [1, 1, 1]\nstrength = -nan\n"), "materials.m.strength"),
+        (
+            "strength_nan.toml",
+            format!("{CAMERA}[materials.m]\ntype = \"diffuse\"\nemission = [1, 1, 1]\nstrength = -nan\n"),
+            "materials.m.strength",
+        ),
         ("eta_neg.toml", format!("{CAMERA}[materials.m]\ntype = \"conductor\"\neta = [-1, 1, 1]\nk = [1, 1, 1]\n"), "materials.m.eta"),
         ("preset.toml", format!("{CAMERA}[materials.m]\ntype = \"conductor\"\npreset = \"Unobtainium\"\n"), "materials.m.preset"),
         ("translate.toml", format!("{CAMERA}{QUAD}translate = [0, nan, 0]\n"), "shapes[0].translate"),
         ("scale0.toml", format!("{CAMERA}{QUAD}scale = 0\n"), "shapes[0].scale"),
         ("angle.toml", format!("{CAMERA}{QUAD}rotate = {{ axis = [0, 1, 0], angle = inf }}\n"), "shapes[0].rotate.angle"),
         ("matrix.toml", format!("{CAMERA}{QUAD}matrix = [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,1,1]]\n"), "shapes[0].matrix"),
-        ("radius.toml", format!("{CAMERA}[materials.m]\ntype = \"diffuse\"\n[[shapes]]\ntype = \"sphere\"\nmaterial = \"m\"\nradius = -1\n"), "shapes[0].radius"),
+        (
+            "radius.toml",
+            format!("{CAMERA}[materials.m]\ntype = \"diffuse\"\n[[shapes]]\ntype = \"sphere\"\nmaterial = \"m\"\nradius = -1\n"),
+            "shapes[0].radius",
+        ),
         ("env_neg.toml", format!("{CAMERA}{QUAD}[environment]\ncolor = [1, 1, 1]\nscale = -2\n"), "environment.scale"),
         ("env_nan.toml", format!("{CAMERA}{QUAD}[environment]\ncolor = [nan, 1, 1]\n"), "environment.color"),
         ("spp0.toml", format!("{CAMERA}{QUAD}[render]\nspp = 0\n"), "render.spp"),
@@ -611,10 +655,18 @@ fn non_finite_and_negative_values_name_the_field() {
 #[test]
 fn unknown_material_names_are_errors() {
     let dir = scratch("err_material");
-    let p = scene_with(&dir, "unknown.toml", &format!("{CAMERA}[materials.m]\ntype = \"diffuse\"\n[[shapes]]\ntype = \"cube\"\nmaterial = \"mm\"\n"));
+    let p = scene_with(
+        &dir,
+        "unknown.toml",
+        &format!("{CAMERA}[materials.m]\ntype = \"diffuse\"\n[[shapes]]\ntype = \"cube\"\nmaterial = \"mm\"\n"),
+    );
     expect_error(&p, &["shapes[0].material", "'mm'"]);
     write(&dir, "t.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
-    let p = scene_with(&dir, "override.toml", &format!("{CAMERA}[[shapes]]\ntype = \"obj\"\nfile = \"t.obj\"\nmaterials_override = {{ light = \"lamp\" }}\n"));
+    let p = scene_with(
+        &dir,
+        "override.toml",
+        &format!("{CAMERA}[[shapes]]\ntype = \"obj\"\nfile = \"t.obj\"\nmaterials_override = {{ light = \"lamp\" }}\n"),
+    );
     expect_error(&p, &["shapes[0].materials_override.light", "'lamp'"]);
 }
 
@@ -657,7 +709,11 @@ fn non_finite_mesh_vertices_name_the_shape() {
 fn absurd_resolutions_are_errors() {
     let dir = scratch("err_resolution");
     for (i, res) in ["[0, 64]", "[64, 0]", "[16385, 16]", "[10000, 10000]"].iter().enumerate() {
-        let p = scene_with(&dir, &format!("res{i}.toml"), &format!("[camera]\nposition = [0, 0, 5]\ntarget = [0, 0, 0]\nresolution = {res}\n{QUAD}"));
+        let p = scene_with(
+            &dir,
+            &format!("res{i}.toml"),
+            &format!("[camera]\nposition = [0, 0, 5]\ntarget = [0, 0, 0]\nresolution = {res}\n{QUAD}"),
+        );
         expect_error(&p, &["camera.resolution"]);
     }
     // The largest legal square (8192² = 2^26 pixels) is accepted.

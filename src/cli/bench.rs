@@ -51,7 +51,14 @@ pub fn run(a: BenchArgs) -> Result<()> {
     let threads = rayon::current_num_threads();
     println!("machine: {threads} threads");
     buffer_overhead(&scene, &a)?;
-    let settings = Settings { width: a.integrator_size.0, height: a.integrator_size.1, spp: a.integrator_spp, max_bounces: a.bounces, repeat: a.repeat, threads };
+    let settings = Settings {
+        width: a.integrator_size.0,
+        height: a.integrator_size.1,
+        spp: a.integrator_spp,
+        max_bounces: a.bounces,
+        repeat: a.repeat,
+        threads,
+    };
     integrator_vs_mitsuba(&a.scene, &settings, !a.no_mitsuba)?;
     rays(&scene, &a, threads)?;
     Ok(())
@@ -65,7 +72,14 @@ fn buffer_overhead(scene: &Scene, a: &BenchArgs) -> Result<()> {
         ("+ split + G-buffers", BufferRequest { split: true, gbuffers: true, descriptors: false }),
         ("+ descriptors (all)", BufferRequest::ALL),
     ];
-    println!("\nbuffer overhead: {} at {}x{}, {} spp (best of {})", a.scene.display(), scene.camera.width, scene.camera.height, a.spp, a.repeat);
+    println!(
+        "\nbuffer overhead: {} at {}x{}, {} spp (best of {})",
+        a.scene.display(),
+        scene.camera.width,
+        scene.camera.height,
+        a.spp,
+        a.repeat
+    );
     println!("{:<22} {:>10} {:>8} {:>16}", "buffers", "time [s]", "ratio", "peak heap [MiB]");
     let mut base = None;
     for (name, req) in configs {
@@ -101,7 +115,9 @@ fn rays(scene: &Scene, a: &BenchArgs, threads: usize) -> Result<()> {
         }
     };
     let big = displaced_sphere(230, 230, SphereStyle::Bench);
-    for (name, mesh) in [(a.scene.display().to_string(), &scene.mesh), (format!("displaced sphere ({} triangles)", big.triangles.len()), &big)] {
+    for (name, mesh) in
+        [(a.scene.display().to_string(), &scene.mesh), (format!("displaced sphere ({} triangles)", big.triangles.len()), &big)]
+    {
         let cam = RayBatch::camera(mesh, a.rays, 1);
         let rnd = RayBatch::random_in_bounds(mesh, a.rays, 2);
         let report = ray_bench(mesh, &[("camera", &cam), ("random", &rnd)], threads, a.repeat as usize, embree.as_ref())?;

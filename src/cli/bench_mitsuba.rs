@@ -78,7 +78,12 @@ impl Session {
         if let Some(p) = libllvm {
             cmd.env("DRJIT_LIBLLVM_PATH", p);
         }
-        let mut child = cmd.stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().with_context(|| format!("starting {}", script.display()))?;
+        let mut child = cmd
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .with_context(|| format!("starting {}", script.display()))?;
         let stdin = child.stdin.take().ok_or_else(|| anyhow!("no stdin pipe"))?;
         let stdout = BufReader::new(child.stdout.take().ok_or_else(|| anyhow!("no stdout pipe"))?);
         let mut err = child.stderr.take().ok_or_else(|| anyhow!("no stderr pipe"))?;
@@ -89,7 +94,13 @@ impl Session {
             let _ = std::io::Read::read_to_string(&mut err, &mut buf);
             buf
         });
-        let mut session = Session { child, stdin, stdout, stderr: Some(stderr), ready: Ready { variant: String::new(), version: String::new(), threads: 0, warmup_seconds: 0.0, fallback_reason: None } };
+        let mut session = Session {
+            child,
+            stdin,
+            stdout,
+            stderr: Some(stderr),
+            ready: Ready { variant: String::new(), version: String::new(), threads: 0, warmup_seconds: 0.0, fallback_reason: None },
+        };
         let v = session.next_message()?;
         session.ready = Ready {
             variant: v["variant"].as_str().unwrap_or_default().to_string(),
@@ -129,7 +140,12 @@ impl Session {
         let mean = v["mean"].as_array().map(|a| a.iter().map(|x| x.as_f64().unwrap_or(f64::NAN)).collect::<Vec<_>>()).unwrap_or_default();
         let seconds = v["seconds"].as_f64().ok_or_else(|| anyhow!("Mitsuba's bench.py: no `seconds` in {v}"))?;
         let cpu_seconds = v["cpu_seconds"].as_f64().unwrap_or(f64::NAN);
-        Ok(MitsubaRun { seconds, cpu_seconds, compiled_kernels: v["compiled_kernels"].as_u64().unwrap_or(0), mean: [0, 1, 2].map(|c| mean.get(c).copied().unwrap_or(f64::NAN)) })
+        Ok(MitsubaRun {
+            seconds,
+            cpu_seconds,
+            compiled_kernels: v["compiled_kernels"].as_u64().unwrap_or(0),
+            mean: [0, 1, 2].map(|c| mean.get(c).copied().unwrap_or(f64::NAN)),
+        })
     }
 }
 
@@ -236,7 +252,10 @@ pub fn integrator_vs_mitsuba(scene_path: &Path, s: &Settings, mitsuba: bool) -> 
         if r.variant.starts_with("llvm") {
             println!("  Mitsuba's JIT warm-up excluded: one untimed render first ({:.2} s: tracing, compiling or loading from Dr.Jit's kernel cache), then the timed ones", r.warmup_seconds);
         } else {
-            println!("  one untimed warm-up render first ({:.2} s; scalar_rgb compiles nothing at run time), then the timed ones", r.warmup_seconds);
+            println!(
+                "  one untimed warm-up render first ({:.2} s; scalar_rgb compiles nothing at run time), then the timed ones",
+                r.warmup_seconds
+            );
         }
     }
     let mut ours_best: Option<(f64, u64)> = None;
@@ -246,7 +265,15 @@ pub fn integrator_vs_mitsuba(scene_path: &Path, s: &Settings, mitsuba: bool) -> 
     let mut theirs_best: Option<MitsubaRun> = None;
     let mut compiled = 0u64;
     for run in 0..s.repeat.max(1) {
-        let opts = RenderOptions { spp: s.spp, seed: run as u64, max_bounces: s.max_bounces, russian_roulette: false, request: BufferRequest::RADIANCE_ONLY, crop: None, first_sample: 0 };
+        let opts = RenderOptions {
+            spp: s.spp,
+            seed: run as u64,
+            max_bounces: s.max_bounces,
+            russian_roulette: false,
+            request: BufferRequest::RADIANCE_ONLY,
+            crop: None,
+            first_sample: 0,
+        };
         let cpu0 = process_cpu_seconds();
         let (frame, st) = integrator::render(&scene, &opts, &|_| {})?;
         if let (Some(a), Some(b)) = (cpu0, process_cpu_seconds()) {
@@ -282,7 +309,11 @@ pub fn integrator_vs_mitsuba(scene_path: &Path, s: &Settings, mitsuba: bool) -> 
     println!("  ours     {:>7.3} M paths/s ({:.2} s per render, {:.3} M rays/s)", ours * 1e-6, secs, rays as f64 / secs * 1e-6);
     if let (Some(m), Some(t)) = (&side, &theirs_best) {
         let theirs = paths / t.seconds;
-        let jit = if m.session.ready.variant.starts_with("llvm") { format!("; {compiled} kernels compiled during the timed runs") } else { String::new() };
+        let jit = if m.session.ready.variant.starts_with("llvm") {
+            format!("; {compiled} kernels compiled during the timed runs")
+        } else {
+            String::new()
+        };
         println!("  Mitsuba  {:>7.3} M paths/s ({:.2} s per render{jit})", theirs * 1e-6, t.seconds);
         println!("  ours/Mitsuba {:.2}x ({}, wall clock)", ours / theirs, m.session.ready.variant);
         if ours_cpu.is_finite() && theirs_cpu.is_finite() && ours_cpu > 0.0 && theirs_cpu > 0.0 {

@@ -52,7 +52,13 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
     }
     let before = mskp.guide_gain_exponent;
     let method = loaded.method;
-    let load = LoadOptions { spps: Vec::new(), descriptors: method.needs_descriptors(), patch: a.patch, sampling: Sampling::Uniform, max_train: Some(0) };
+    let load = LoadOptions {
+        spps: Vec::new(),
+        descriptors: method.needs_descriptors(),
+        patch: a.patch,
+        sampling: Sampling::Uniform,
+        max_train: Some(0),
+    };
     let t0 = Instant::now();
     let data = Dataset::load(&a.data, &load, &mut |_, _| {})?;
     eprintln!("{}: {} validation shots {}×{} at {:?} spp", a.data.display(), data.val.len(), data.width, data.height, data.spps);
@@ -86,7 +92,11 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
     bar.finish_and_clear();
     let best = cal.best;
     let score = |g: f64| cal.tried.iter().find(|t| t.0 == g).map(|t| t.1.overall);
-    println!("kept γ = {best} (validation {:.5}; γ = 0: {})", score(best).unwrap_or(f64::NAN), score(0.0).map_or("not tried".into(), |v| format!("{v:.5}")));
+    println!(
+        "kept γ = {best} (validation {:.5}; γ = 0: {})",
+        score(best).unwrap_or(f64::NAN),
+        score(0.0).map_or("not tried".into(), |v| format!("{v:.5}"))
+    );
     loaded.config.mskp.as_mut().expect("checked above").guide_gain_exponent = best;
     let tried: Vec<String> = cal.tried.iter().map(|(g, v)| format!("{g}: {:.5}", v.overall)).collect();
     let note = format!(
@@ -98,7 +108,8 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
     );
     let notes = &mut loaded.provenance.notes;
     *notes = if notes.is_empty() { note } else { format!("{notes}; {note}") };
-    weights::save(&a.output, &loaded.model, &loaded.config, &loaded.preset, &loaded.provenance).with_context(|| format!("writing {}", a.output.display()))?;
+    weights::save(&a.output, &loaded.model, &loaded.config, &loaded.preset, &loaded.provenance)
+        .with_context(|| format!("writing {}", a.output.display()))?;
     eprintln!("{} written in {:.0} s", a.output.display(), t0.elapsed().as_secs_f64());
     Ok(())
 }

@@ -63,7 +63,10 @@ fn parse_shard(s: &str) -> std::result::Result<(usize, usize), String> {
 
 pub fn parse_size(s: &str) -> Result<(u32, u32)> {
     let (w, h) = s.split_once(['x', 'X']).with_context(|| format!("--size {s}: expected WxH, e.g. 128x128"))?;
-    let (w, h): (u32, u32) = (w.trim().parse().with_context(|| format!("--size {s}: bad width"))?, h.trim().parse().with_context(|| format!("--size {s}: bad height"))?);
+    let (w, h): (u32, u32) = (
+        w.trim().parse().with_context(|| format!("--size {s}: bad width"))?,
+        h.trim().parse().with_context(|| format!("--size {s}: bad height"))?,
+    );
     if w < 16 || h < 16 || w > 4096 || h > 4096 {
         bail!("--size {s}: each side must be between 16 and 4096 pixels");
     }

@@ -72,7 +72,8 @@ pub enum Model {
 
 impl Model {
     /// Every model, in the order help texts list them: the methods' own order, then OIDN.
-    pub const ALL: [Model; 5] = [Model::Net(Method::G), Model::Net(Method::P), Model::Net(Method::Both), Model::Net(Method::Guided), Model::Oidn];
+    pub const ALL: [Model; 5] =
+        [Model::Net(Method::G), Model::Net(Method::P), Model::Net(Method::Both), Model::Net(Method::Guided), Model::Oidn];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -181,10 +182,7 @@ pub fn read_reference(path: &Path, w: u32, h: u32) -> Result<Frame> {
 pub fn error_line(label: &str, rgb: &[f32], reference: &Frame) -> String {
     let (w, h) = (reference.width as usize, reference.height as usize);
     let e = metrics::evaluate(rgb, &reference.radiance.mean, w, h, metrics::DEFAULT_BORDER);
-    format!(
-        "{label:>9}: relMSE {:.5} (gamma {:.5}), 1-SSIM {:.5}",
-        e.rel_mse, e.rel_mse_gamma, e.one_minus_ssim
-    )
+    format!("{label:>9}: relMSE {:.5} (gamma {:.5}), 1-SSIM {:.5}", e.rel_mse, e.rel_mse_gamma, e.one_minus_ssim)
 }
 
 pub fn print_denoise_summary(loaded: &Loaded, run: &DenoiseRun) {
@@ -212,7 +210,13 @@ pub fn run(a: DenoiseArgs) -> Result<()> {
     // Weights first: a missing file should not cost the time of reading a large frame.
     let loaded = load_weights(method, a.weights.as_deref())?;
     let mut frame = film::exr_io::read_frame(&a.frame).with_context(|| format!("reading {}", a.frame.display()))?;
-    for (name, b) in [("diffuse", &frame.diffuse), ("specular", &frame.specular), ("albedo", &frame.albedo), ("normal", &frame.normal), ("depth", &frame.depth)] {
+    for (name, b) in [
+        ("diffuse", &frame.diffuse),
+        ("specular", &frame.specular),
+        ("albedo", &frame.albedo),
+        ("normal", &frame.normal),
+        ("depth", &frame.depth),
+    ] {
         if b.is_none() {
             bail!("{} has no {name} buffer: the denoiser needs the frame written by `pixguide render --aovs`", a.frame.display());
         }

@@ -50,7 +50,12 @@ impl DrawingBackend for Canvas<'_> {
         Ok(())
     }
 
-    fn draw_text<S: BackendTextStyle>(&mut self, text: &str, style: &S, pos: BackendCoord) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+    fn draw_text<S: BackendTextStyle>(
+        &mut self,
+        text: &str,
+        style: &S,
+        pos: BackendCoord,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
         let m = font::mask(text, style.size() as f32);
         let (tw, th) = (m.w as i32, m.h as i32);
         let anchor = style.anchor();
@@ -135,7 +140,9 @@ fn ticks(lo: f64, hi: f64) -> Vec<f64> {
 
 /// As `ticks`, taking a finer sequence while the coarser one leaves fewer than `n`.
 pub(super) fn ticks_at_least(lo: f64, hi: f64, n: usize) -> Vec<f64> {
-    for steps in [&[1.0, 2.0, 5.0][..], &[1.0, 1.5, 2.0, 3.0, 5.0, 7.0][..], &[1.0, 1.2, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0][..]] {
+    for steps in
+        [&[1.0, 2.0, 5.0][..], &[1.0, 1.5, 2.0, 3.0, 5.0, 7.0][..], &[1.0, 1.2, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0][..]]
+    {
         let mut out = Vec::new();
         let mut e = lo.log10().floor() as i32;
         while 10f64.powi(e) <= hi && out.len() < 40 {
@@ -166,7 +173,14 @@ fn tick(v: f64) -> String {
     }
 }
 
-fn panel(area: &DrawingArea<Canvas<'_>, Shift>, title: &str, x_label: &str, y_label: &str, curves: &[Curve], x_keys: Option<Vec<f64>>) -> Result<()> {
+fn panel(
+    area: &DrawingArea<Canvas<'_>, Shift>,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    curves: &[Curve],
+    x_keys: Option<Vec<f64>>,
+) -> Result<()> {
     let (x0, x1) = log_range(curves.iter().flat_map(|c| c.points.iter().map(|p| p.0)));
     let (y0, y1) = log_range(curves.iter().flat_map(|c| c.points.iter().map(|p| p.1)));
     let x_keys = x_keys.unwrap_or_else(|| ticks(x0, x1));
@@ -191,7 +205,8 @@ fn panel(area: &DrawingArea<Canvas<'_>, Shift>, title: &str, x_label: &str, y_la
         .draw()
         .map_err(err)?;
     for c in curves {
-        let pts: Vec<(f64, f64)> = c.points.iter().copied().filter(|(x, y)| *x > 0.0 && *y > 0.0 && x.is_finite() && y.is_finite()).collect();
+        let pts: Vec<(f64, f64)> =
+            c.points.iter().copied().filter(|(x, y)| *x > 0.0 && *y > 0.0 && x.is_finite() && y.is_finite()).collect();
         if pts.is_empty() {
             continue;
         }
@@ -297,7 +312,11 @@ mod tests {
 
     #[test]
     fn legend_lists_drawable_curves_once_and_fits() {
-        let a = [curve("noisy (MC)", 0, vec![(1.0, 1.0)]), curve("E radiances only", 7, vec![(2.0, 0.5)]), curve("empty", 3, vec![(0.0, 1.0), (f64::NAN, 2.0)])];
+        let a = [
+            curve("noisy (MC)", 0, vec![(1.0, 1.0)]),
+            curve("E radiances only", 7, vec![(2.0, 0.5)]),
+            curve("empty", 3, vec![(0.0, 1.0), (f64::NAN, 2.0)]),
+        ];
         let b = [curve("noisy (MC)", 0, vec![(1.0, 0.9)])];
         let e = legend_entries(&[&a, &b]);
         assert_eq!(e, vec![(0, "noisy (MC)"), (7, "E radiances only")]);

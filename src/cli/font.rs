@@ -5,8 +5,9 @@
 use ab_glyph::{point, Font, FontRef, GlyphId, PxScale, ScaleFont};
 use std::sync::LazyLock;
 
-static FONT: LazyLock<FontRef<'static>> =
-    LazyLock::new(|| FontRef::try_from_slice(include_bytes!("../../assets/fonts/DejaVuSans.ttf")).expect("the embedded DejaVu Sans is a valid TrueType font"));
+static FONT: LazyLock<FontRef<'static>> = LazyLock::new(|| {
+    FontRef::try_from_slice(include_bytes!("../../assets/fonts/DejaVuSans.ttf")).expect("the embedded DejaVu Sans is a valid TrueType font")
+});
 
 /// Coverage (0 to 1) of one line of text over its box, `w × h` pixels row by row. The box is the
 /// font's ascent to descent at the size, so lines of one size have one height whatever letters

@@ -32,19 +32,14 @@ pub fn venv_dir() -> PathBuf {
         return PathBuf::from(v);
     }
     let built = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let root = if built.is_dir() {
-        built
-    } else {
-        Path::new(".")
-    };
+    let root = if built.is_dir() { built } else { Path::new(".") };
     root.join("target/oidn-venv")
 }
 
 /// The folder holding `libOpenImageDenoise.so.2`, installing the wheel first if needed.
 pub fn library_dir() -> Result<PathBuf> {
     let venv = venv_dir();
-    let v = tools_venv::tools_venv(&venv, &[PACKAGE], PROBE)
-        .with_context(|| format!("installing Open Image Denoise (pip {PACKAGE})"))?;
+    let v = tools_venv::tools_venv(&venv, &[PACKAGE], PROBE).with_context(|| format!("installing Open Image Denoise (pip {PACKAGE})"))?;
     Ok(PathBuf::from(v.probe))
 }
 
@@ -76,27 +71,12 @@ pub fn describe(oidn: &Oidn) -> String {
 /// wall time of the filter (commit + execute).
 pub fn denoise_frame(oidn: &Oidn, frame: &Frame) -> Result<Denoised> {
     let (w, h) = (frame.width as usize, frame.height as usize);
-    let albedo = frame
-        .albedo
-        .as_ref()
-        .context("OIDN needs the albedo G-buffer, and the frame has none (render with --aovs)")?;
-    let normal = frame
-        .normal
-        .as_ref()
-        .context("OIDN needs the normal G-buffer, and the frame has none (render with --aovs)")?;
+    let albedo = frame.albedo.as_ref().context("OIDN needs the albedo G-buffer, and the frame has none (render with --aovs)")?;
+    let normal = frame.normal.as_ref().context("OIDN needs the normal G-buffer, and the frame has none (render with --aovs)")?;
     let t = Instant::now();
     let radiance = oidn.denoise(&frame.radiance.mean, &albedo.mean, &normal.mean, w, h)?;
-    let timings = Timings {
-        total_s: t.elapsed().as_secs_f64(),
-        ..Default::default()
-    };
-    Ok(Denoised {
-        width: w,
-        height: h,
-        radiance,
-        weights_g: None,
-        timings,
-    })
+    let timings = Timings { total_s: t.elapsed().as_secs_f64(), ..Default::default() };
+    Ok(Denoised { width: w, height: h, radiance, weights_g: None, timings })
 }
 
 pub fn print_summary(oidn: &Oidn, load_s: f64, d: &Denoised) {

@@ -115,7 +115,10 @@ fn parse_log(name: &str, text: &str) -> Result<Run> {
             let msg = e.to_string();
             anyhow!("{}, column {}: not valid JSON ({})", at(), e.column(), msg.split(" at line ").next().unwrap_or(&msg))
         })?;
-        let event = v.get("event").and_then(Value::as_str).ok_or_else(|| anyhow!("{}: no \"event\" field (is this a `pixguide train` log?)", at()))?;
+        let event = v
+            .get("event")
+            .and_then(Value::as_str)
+            .ok_or_else(|| anyhow!("{}: no \"event\" field (is this a `pixguide train` log?)", at()))?;
         match event {
             "step" => {
                 let (stage, step) = (field_u64(&v, "stage", "step").with_context(at)?, field_u64(&v, "step", "step").with_context(at)?);
@@ -156,7 +159,11 @@ fn parse_log(name: &str, text: &str) -> Result<Run> {
     // Steps trained after the last validation still count towards the run's length.
     let minutes = (seconds_at(&last) + (step_seconds - last.3)) / 60.0;
     let steps = (stage_steps.values().sum::<u64>() as usize).max(last.0);
-    let vals: Vec<Val> = vals.iter().filter(|v| v.1.is_finite() && v.1 > 0.0).map(|v| Val { step: v.0, rel_mse: v.1, minutes: seconds_at(v) / 60.0 }).collect();
+    let vals: Vec<Val> = vals
+        .iter()
+        .filter(|v| v.1.is_finite() && v.1 > 0.0)
+        .map(|v| Val { step: v.0, rel_mse: v.1, minutes: seconds_at(v) / 60.0 })
+        .collect();
     if vals.is_empty() {
         bail!("{name}: no validation with a finite, positive relMSE");
     }
@@ -198,7 +205,8 @@ fn table(runs: &[(String, Run)]) -> String {
             None => "not yet".into(),
         };
         let mark = if r.time_from_steps { " *" } else { "" };
-        s += &format!("| {label}{mark} | {} | {:.1} | {} | {} | {:.1} | {flat} |\n", r.steps, r.minutes, sig4(b.rel_mse), b.step, b.minutes);
+        s +=
+            &format!("| {label}{mark} | {} | {:.1} | {} | {} | {:.1} | {flat} |\n", r.steps, r.minutes, sig4(b.rel_mse), b.step, b.minutes);
     }
     if runs.iter().any(|r| r.1.time_from_steps) {
         s += "\n\\* log without validation times: minutes are summed step durations and leave out validation.\n";
@@ -257,7 +265,13 @@ fn panel(area: &DrawingArea<Canvas<'_>, Shift>, caption: &str, x_label: &str, ru
     let x_max = runs.iter().flat_map(|r| &r.1.vals).map(x_of).fold(0.0, f64::max).max(1e-6) * 1.05;
     let (y0, y1) = y_range(runs);
     let (y_keys, y_dec) = y_ticks(y0, y1);
-    let x_dec = if x_max < 3.0 { 2 } else if x_max < 30.0 { 1 } else { 0 };
+    let x_dec = if x_max < 3.0 {
+        2
+    } else if x_max < 30.0 {
+        1
+    } else {
+        0
+    };
     let mut chart = ChartBuilder::on(area)
         .caption(caption, ("sans-serif", CAPTION_SIZE))
         .margin(12)
@@ -296,8 +310,7 @@ const NOTE_SIZE: f32 = 14.0;
 
 fn draw(path: &Path, title: &str, runs: &[(String, Run)]) -> Result<()> {
     let (w, plot_h) = (1100u32, 440u32);
-    let legend_labels: Vec<String> =
-        runs.iter().map(|(l, r)| if r.time_from_steps { format!("{l} *") } else { l.clone() }).collect();
+    let legend_labels: Vec<String> = runs.iter().map(|(l, r)| if r.time_from_steps { format!("{l} *") } else { l.clone() }).collect();
     let entries: Vec<(usize, &str)> = legend_labels.iter().enumerate().map(|(i, l)| (i, l.as_str())).collect();
     let legend_h = eval_plot::legend_height(&entries, w);
     let mut notes = vec!["Rings: the best validation of each run.".to_string()];

@@ -126,10 +126,12 @@ pub fn run(a: ReferenceArgs) -> Result<()> {
 /// Regenerates scenes/references/README.md from the .json sidecars.
 fn write_readme(dir: &Path) -> Result<()> {
     let mut rows = Vec::new();
-    let mut entries: Vec<_> = std::fs::read_dir(dir)?.flatten().map(|e| e.path()).filter(|p| p.extension().is_some_and(|e| e == "json")).collect();
+    let mut entries: Vec<_> =
+        std::fs::read_dir(dir)?.flatten().map(|e| e.path()).filter(|p| p.extension().is_some_and(|e| e == "json")).collect();
     entries.sort();
     for p in entries {
-        let info: ReferenceInfo = serde_json::from_str(&std::fs::read_to_string(&p)?).with_context(|| format!("reading {}", p.display()))?;
+        let info: ReferenceInfo =
+            serde_json::from_str(&std::fs::read_to_string(&p)?).with_context(|| format!("reading {}", p.display()))?;
         let name = p.file_stem().unwrap().to_string_lossy().into_owned();
         rows.push(format!(
             "| {name} | `{}` | {}x{} | {} | {} | {:.0} | `{}` |",

@@ -4,12 +4,12 @@ use super::denoise::{self as dn, InferArgs, Model};
 use super::progress;
 use anyhow::{Context, Result};
 use clap::Args;
-use renderer::film::{self, BufferRequest, Frame};
-use renderer::integrator::{self, RenderOptions};
-use renderer::scene::Scene;
 use denoiser::method::Method;
 use denoiser::oidn::Oidn;
 use denoiser::weights::Loaded;
+use renderer::film::{self, BufferRequest, Frame};
+use renderer::integrator::{self, RenderOptions};
+use renderer::scene::Scene;
 use std::path::{Path, PathBuf};
 
 #[derive(Args)]
@@ -83,7 +83,14 @@ impl clap::ValueEnum for DenoiseModel {
     fn value_variants<'a>() -> &'a [Self] {
         const ALL: [DenoiseModel; 6] = {
             let m = Model::ALL;
-            [DenoiseModel(Some(m[0])), DenoiseModel(Some(m[1])), DenoiseModel(Some(m[2])), DenoiseModel(Some(m[3])), DenoiseModel(Some(m[4])), DenoiseModel(None)]
+            [
+                DenoiseModel(Some(m[0])),
+                DenoiseModel(Some(m[1])),
+                DenoiseModel(Some(m[2])),
+                DenoiseModel(Some(m[3])),
+                DenoiseModel(Some(m[4])),
+                DenoiseModel(None),
+            ]
         };
         &ALL
     }
@@ -208,7 +215,11 @@ fn write_aovs(frame: &Frame, output: &Path, exposure: f32) -> Result<()> {
     let mut tiles: Vec<(&str, Vec<f32>)> = vec![("radiance", frame.radiance.mean.iter().map(|v| v * 2f32.powf(exposure)).collect())];
     let mut add = |name: &'static str, buf: &Option<film::PixelBuffer>, signed: bool, radiance: bool| {
         if let Some(b) = buf {
-            let rgb = if radiance { b.mean.iter().map(|v| v * 2f32.powf(exposure)).collect() } else { film::png::normalised_rgb(&b.mean, b.channels, signed) };
+            let rgb = if radiance {
+                b.mean.iter().map(|v| v * 2f32.powf(exposure)).collect()
+            } else {
+                film::png::normalised_rgb(&b.mean, b.channels, signed)
+            };
             tiles.push((name, rgb));
             tiles.push((Box::leak(format!("{name} variance").into_boxed_str()), film::png::normalised_rgb(&b.var, b.channels, false)));
         }

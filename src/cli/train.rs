@@ -150,7 +150,8 @@ pub struct TrainArgs {
 
 /// The `--backend` choice, or an error naming the cargo feature a missing backend needs.
 fn backend(a: &TrainArgs) -> Result<denoiser::Backend> {
-    let b = denoiser::Backend::parse(&a.backend).with_context(|| format!("--backend {}: expected one of {}", a.backend, denoiser::Backend::NAMES.join(", ")))?;
+    let b = denoiser::Backend::parse(&a.backend)
+        .with_context(|| format!("--backend {}: expected one of {}", a.backend, denoiser::Backend::NAMES.join(", ")))?;
     b.device().map_err(|e| anyhow::anyhow!("--backend {}: {e}", a.backend))?;
     Ok(b)
 }
@@ -195,7 +196,14 @@ struct PlanItem {
     secs_per_step: f64,
 }
 
-const fn item(name: &'static str, method: Method, ablation: Option<Ablation>, preset: Preset, steps: [usize; 3], secs_per_step: f64) -> PlanItem {
+const fn item(
+    name: &'static str,
+    method: Method,
+    ablation: Option<Ablation>,
+    preset: Preset,
+    steps: [usize; 3],
+    secs_per_step: f64,
+) -> PlanItem {
     PlanItem { name, method, ablation, preset, steps, secs_per_step }
 }
 
@@ -222,7 +230,12 @@ fn run_all(a: TrainArgs) -> Result<()> {
     let scaled = |n: usize| if n == 0 { 0 } else { ((n as f64 * a.all_scale).round() as usize).max(1) };
     let steps = |it: &PlanItem| -> usize { it.steps.iter().map(|&n| scaled(n)).sum() };
     let weight: Vec<f64> = PLAN.iter().map(|it| it.secs_per_step * steps(it) as f64).collect();
-    println!("plan: {} runs, {:.0} steps, estimated {:.0} min without other load", PLAN.len(), PLAN.iter().map(|it| steps(it) as f64).sum::<f64>(), weight.iter().sum::<f64>() / 60.0);
+    println!(
+        "plan: {} runs, {:.0} steps, estimated {:.0} min without other load",
+        PLAN.len(),
+        PLAN.iter().map(|it| steps(it) as f64).sum::<f64>(),
+        weight.iter().sum::<f64>() / 60.0
+    );
     let path = |name: &str, preset: Preset| a.out_dir.join(format!("{name}-{preset}.safetensors"));
     let start = Instant::now();
     let mut cache = DataCache::new();
@@ -256,7 +269,14 @@ fn run_all(a: TrainArgs) -> Result<()> {
             let share: f64 = weight[k] / weight[k..].iter().sum::<f64>();
             r.minutes = Some((left * share).max(0.5));
         }
-        println!("[{}/{}] {} ({}){}", k + 1, PLAN.len(), it.name, it.preset, r.minutes.map(|m| format!(", budget {m:.1} min")).unwrap_or_default());
+        println!(
+            "[{}/{}] {} ({}){}",
+            k + 1,
+            PLAN.len(),
+            it.name,
+            it.preset,
+            r.minutes.map(|m| format!(", budget {m:.1} min")).unwrap_or_default()
+        );
         run_one(r, &mut cache)?;
     }
     println!("plan done in {:.1} min", start.elapsed().as_secs_f64() / 60.0);
@@ -378,7 +398,8 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
         s.push(".log.jsonl");
         PathBuf::from(s)
     };
-    let mut log = std::fs::OpenOptions::new().create(true).append(true).open(&log_path).with_context(|| format!("opening {}", log_path.display()))?;
+    let mut log =
+        std::fs::OpenOptions::new().create(true).append(true).open(&log_path).with_context(|| format!("opening {}", log_path.display()))?;
     let total: usize = opts.stages.iter().map(|s| s.steps).sum();
     let pb = progress::bar(total as u64, &format!("train {name}"));
     pb.set_style(
@@ -389,11 +410,15 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
     if a.quiet {
         pb.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
-    let stage_offsets: Vec<usize> = opts.stages.iter().scan(0, |acc, s| {
-        let o = *acc;
-        *acc += s.steps;
-        Some(o)
-    }).collect();
+    let stage_offsets: Vec<usize> = opts
+        .stages
+        .iter()
+        .scan(0, |acc, s| {
+            let o = *acc;
+            *acc += s.steps;
+            Some(o)
+        })
+        .collect();
     let heap_peak0 = alloc_stats::reset_peak();
     let (mut ema, mut rate, mut last_val) = (None::<f64>, None::<f64>, None::<f64>);
     let mut stage_time: Vec<(f64, usize)> = vec![(0.0, 0); opts.stages.len()];
@@ -430,7 +455,14 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
             }
             Event::Validation { stage, step, total_step, rel_mse, best, seconds } => {
                 last_val = Some(*rel_mse);
-                LogLine::Val { stage: *stage, step: *step, total_step: *total_step, rel_mse: *rel_mse, best: *best, seconds: rounded(*seconds, 2) }
+                LogLine::Val {
+                    stage: *stage,
+                    step: *step,
+                    total_step: *total_step,
+                    rel_mse: *rel_mse,
+                    best: *best,
+                    seconds: rounded(*seconds, 2),
+                }
             }
             Event::Checkpoint { path } => LogLine::Checkpoint { dir: path.display().to_string() },
             Event::StageEnd { index, steps, reason } => {
@@ -505,11 +537,22 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
 
 /// `git rev-parse HEAD` (+ "-dirty" with local changes), empty outside a repository.
 pub fn git_commit() -> String {
-    let run = |args: &[&str]| std::process::Command::new("git").args(args).output().ok().filter(|o| o.status.success()).map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
+    let run = |args: &[&str]| {
+        std::process::Command::new("git")
+            .args(args)
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+    };
     match run(&["rev-parse", "HEAD"]) {
         Some(h) => {
             let dirty = run(&["status", "--porcelain", "--untracked-files=no"]).is_some_and(|s| !s.is_empty());
-            if dirty { format!("{h}-dirty") } else { h }
+            if dirty {
+                format!("{h}-dirty")
+            } else {
+                h
+            }
         }
         None => String::new(),
     }
@@ -557,13 +600,20 @@ mod tests {
     #[test]
     fn log_lines_keep_their_text() {
         let line = |l: LogLine| serde_json::to_string(&l).unwrap();
-        let stage = LogLine::Stage { stage: 0, kind: "branches", steps: 50, from_step: 0, steps_per_epoch: 5, lr_rest: Some(0.001), lr_e: None };
-        assert_eq!(line(stage), r#"{"event":"stage","stage":0,"kind":"branches","steps":50,"from_step":0,"steps_per_epoch":5,"lr_rest":0.001,"lr_e":null}"#);
+        let stage =
+            LogLine::Stage { stage: 0, kind: "branches", steps: 50, from_step: 0, steps_per_epoch: 5, lr_rest: Some(0.001), lr_e: None };
+        assert_eq!(
+            line(stage),
+            r#"{"event":"stage","stage":0,"kind":"branches","steps":50,"from_step":0,"steps_per_epoch":5,"lr_rest":0.001,"lr_e":null}"#
+        );
         let step = LogLine::Step { stage: 1, step: 7, loss: f64::NAN, seconds: rounded(0.123_456, 4) };
         assert_eq!(line(step), r#"{"event":"step","stage":1,"step":7,"loss":null,"seconds":0.1235}"#);
         let val = LogLine::Val { stage: 1, step: 7, total_step: 9, rel_mse: 0.0125, best: true, seconds: rounded(12.345_6, 2) };
         assert_eq!(line(val), r#"{"event":"val","stage":1,"step":7,"total_step":9,"rel_mse":0.0125,"best":true,"seconds":12.35}"#);
         assert_eq!(line(LogLine::Checkpoint { dir: "a \"b\"".into() }), r#"{"event":"checkpoint","dir":"a \"b\""}"#);
-        assert_eq!(line(LogLine::StageEnd { stage: 0, steps: 10, reason: "steps done" }), r#"{"event":"stage_end","stage":0,"steps":10,"reason":"steps done"}"#);
+        assert_eq!(
+            line(LogLine::StageEnd { stage: 0, steps: 10, reason: "steps done" }),
+            r#"{"event":"stage_end","stage":0,"steps":10,"reason":"steps done"}"#
+        );
     }
 }

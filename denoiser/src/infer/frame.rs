@@ -32,7 +32,12 @@ pub enum FrameError {
 /// Preprocesses and denoises a frame in memory on `device`. The descriptors move from the frame
 /// into the prepared image (they are the largest buffer; inference normalises them as it reads
 /// them), so `frame.descriptors` is `None` afterwards.
-pub fn denoise_frame(frame: &mut Frame, loaded: &Loaded, opts: &InferOptions, device: &burn::tensor::Device) -> Result<FrameRun, FrameError> {
+pub fn denoise_frame(
+    frame: &mut Frame,
+    loaded: &Loaded,
+    opts: &InferOptions,
+    device: &burn::tensor::Device,
+) -> Result<FrameRun, FrameError> {
     let t = Instant::now();
     if loaded.method.needs_descriptors() && frame.descriptors.is_none() {
         return Err(FrameError::MissingDescriptors(loaded.method));

@@ -239,15 +239,24 @@ fn windows_carry_the_receptive_radius() {
 fn staged_equals_model_forward() {
     let mskp = tiny().with_mskp(Some(MsKpConfig::new(34).with_widths(vec![6, 8]).with_kernel_scales(2).with_filter_size(3).with_margin(2)));
     // The shipped compositor, at three kernel scales so that two of them swap a low band.
-    let swap = MsKpConfig::new(34).with_widths(vec![4, 4, 4]).with_convs_per_block(1).with_kernel_scales(3).with_filter_size(3).with_margin(2);
+    let swap =
+        MsKpConfig::new(34).with_widths(vec![4, 4, 4]).with_convs_per_block(1).with_kernel_scales(3).with_filter_size(3).with_margin(2);
     let swap = tiny().with_mskp(Some(swap.with_compositor(crate::mskp::ScaleCompositor::LowPassSwap)));
     // Edge-stopping kernels and joint-bilateral upsampling read guides at every level.
-    let edge = MsKpConfig::new(34).with_widths(vec![4, 4, 4]).with_convs_per_block(1).with_kernel_scales(3).with_filter_size(3).with_margin(2);
+    let edge =
+        MsKpConfig::new(34).with_widths(vec![4, 4, 4]).with_convs_per_block(1).with_kernel_scales(3).with_filter_size(3).with_margin(2);
     let edge = tiny().with_mskp(Some(edge.with_edge_stopping(crate::mskp::EdgeStopping::FeaturesAndColour)));
     // The noise-normalised colour guides, one with a pooled variance that reads past the kernel.
-    let noise = MsKpConfig::new(34).with_widths(vec![4, 4, 4]).with_convs_per_block(1).with_kernel_scales(3).with_filter_size(3).with_margin(2);
+    let noise =
+        MsKpConfig::new(34).with_widths(vec![4, 4, 4]).with_convs_per_block(1).with_kernel_scales(3).with_filter_size(3).with_margin(2);
     let noise = tiny().with_mskp(Some(noise.with_edge_stopping(crate::mskp::EdgeStopping::FeaturesAndNoisyColour)));
-    for (cfg, (w, h), tiles) in [(tiny(), (37, 29), [8, 13]), (mskp, (80, 72), [16, 24]), (swap, (120, 104), [16, 24]), (edge, (120, 104), [16, 24]), (noise, (120, 104), [16, 24])] {
+    for (cfg, (w, h), tiles) in [
+        (tiny(), (37, 29), [8, 13]),
+        (mskp, (80, 72), [16, 24]),
+        (swap, (120, 104), [16, 24]),
+        (edge, (120, 104), [16, 24]),
+        (noise, (120, 104), [16, 24]),
+    ] {
         staged_equals_model_forward_for(&cfg, w, h, tiles);
     }
 }

@@ -49,7 +49,11 @@ pub fn unet_window_side(config: &DenoiserConfig, method: Method, tile: usize) ->
 ///
 /// [`CHUNK_SAMPLE_PIXELS`]: super::CHUNK_SAMPLE_PIXELS
 pub fn auto_tile(config: &DenoiserConfig) -> usize {
-    if config.mskp.is_some() { 1024 } else { 256 }
+    if config.mskp.is_some() {
+        1024
+    } else {
+        256
+    }
 }
 
 /// [`denoise`] with the chunk size of the per-sample stages as a parameter (tests use small

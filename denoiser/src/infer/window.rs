@@ -65,7 +65,16 @@ pub(super) fn window_origin(p: usize, c: usize, a: usize, size: usize, padded: u
 }
 
 /// Planar `[ch, h, w]` map → `[1, ch, wh, ww]` tensor of the window at (x0, y0), for each window.
-pub(super) fn cut_map(map: &[f32], ch: usize, w: usize, h: usize, origins: &[(usize, usize)], ww: usize, wh: usize, device: &Device) -> Tensor<4> {
+pub(super) fn cut_map(
+    map: &[f32],
+    ch: usize,
+    w: usize,
+    h: usize,
+    origins: &[(usize, usize)],
+    ww: usize,
+    wh: usize,
+    device: &Device,
+) -> Tensor<4> {
     let mut data = Vec::with_capacity(origins.len() * ch * ww * wh);
     for &(x0, y0) in origins {
         for c in 0..ch {

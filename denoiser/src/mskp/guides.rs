@@ -102,7 +102,19 @@ pub struct GuideGroup {
 
 impl GuideGroup {
     pub fn new(start: usize, len: usize, scale: f64, log: bool) -> Self {
-        GuideGroup { start, len, scale, log, brighter_only: false, variance: None, init_log_strength: None, pooled_variance: false, two_sided: false, two_sided_fades: false, doubt_black: false }
+        GuideGroup {
+            start,
+            len,
+            scale,
+            log,
+            brighter_only: false,
+            variance: None,
+            init_log_strength: None,
+            pooled_variance: false,
+            two_sided: false,
+            two_sided_fades: false,
+            doubt_black: false,
+        }
     }
 
     pub fn brighter_only(self) -> Self {
@@ -157,7 +169,13 @@ impl GuideLevel {
     /// The next coarser level: 2×2 box means, whose variance is a quarter of the mean variance
     /// (independent pixels).
     pub(super) fn down(&self) -> Self {
-        GuideLevel { x: box_down(self.x.clone()), var: self.var.clone().map(|v| box_down(v).div_scalar(4.0)), brighter_only: self.brighter_only, two_sided_share: self.two_sided_share, doubt_black: self.doubt_black }
+        GuideLevel {
+            x: box_down(self.x.clone()),
+            var: self.var.clone().map(|v| box_down(v).div_scalar(4.0)),
+            brighter_only: self.brighter_only,
+            two_sided_share: self.two_sided_share,
+            doubt_black: self.doubt_black,
+        }
     }
 }
 
@@ -261,7 +279,13 @@ pub(super) fn guide_features(input: &Tensor<4>, guides: &[GuideGroup], spp: usiz
                 let v = if g.pooled_variance { pooled_variance(v) } else { v };
                 v.mul_scalar(g.scale * g.scale)
             });
-            GuideLevel { x: x.mul_scalar(g.scale), var, brighter_only: g.brighter_only, two_sided_share: two_sided_share(g, spp), doubt_black: g.two_sided && g.doubt_black }
+            GuideLevel {
+                x: x.mul_scalar(g.scale),
+                var,
+                brighter_only: g.brighter_only,
+                two_sided_share: two_sided_share(g, spp),
+                doubt_black: g.two_sided && g.doubt_black,
+            }
         })
         .collect()
 }
@@ -324,13 +348,22 @@ const UPSAMPLE_FALLBACK_LOG_WEIGHT: f32 = -6.0;
 /// a small feature (a 3×3 shadow, a thin edge) has no coarse pixel of its own, so every coarse tap
 /// is cut and the softmax would otherwise hand the pixel to the least different one, however far
 /// (a shadow filled with the sunlit wall around it, docs/denoiser.md).
-pub(super) fn joint_upsample(coarse: Tensor<4>, fallback: Tensor<4>, coarse_guides: &[GuideLevel], fine_guides: &[GuideLevel], strength: Tensor<4>, fh: usize, fw: usize) -> Tensor<4> {
+pub(super) fn joint_upsample(
+    coarse: Tensor<4>,
+    fallback: Tensor<4>,
+    coarse_guides: &[GuideLevel],
+    fine_guides: &[GuideLevel],
+    strength: Tensor<4>,
+    fh: usize,
+    fw: usize,
+) -> Tensor<4> {
     let [b, c, h, w] = coarse.dims();
     let n = fh * fw;
     let mut logits = fit_to(bilinear_tap_logits(h, w, &coarse.device()), fh, fw).reshape([1, 9, n]).repeat_dim(0, b);
     for (i, (cg, fg)) in coarse_guides.iter().zip(fine_guides).enumerate() {
         let gc = fg.x.dims()[1];
-        let var = cg.var.as_ref().zip(fg.var.as_ref()).map(|(cv, fv)| (coarse_windows(cv.clone(), fh, fw), fv.clone().reshape([b, 1, 1, n])));
+        let var =
+            cg.var.as_ref().zip(fg.var.as_ref()).map(|(cv, fv)| (coarse_windows(cv.clone(), fh, fw), fv.clone().reshape([b, 1, 1, n])));
         let d = guide_distance(coarse_windows(cg.x.clone(), fh, fw), fg.x.clone().reshape([b, gc, 1, n]), var, fg);
         logits = logits - d * strength.clone().narrow(1, i, 1).reshape([b, 1, n]);
     }

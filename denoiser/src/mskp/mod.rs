@@ -47,10 +47,10 @@ use crate::kernel::apply_kernel;
 use crate::layers::{center_crop, conv_macs, Activation, Conv, ConvSpec, ConvStack, Init, Padding};
 
 mod guides;
-pub use guides::{tap_distances, two_sided_share, EdgeStopping, GuideGroup, GuideLevel};
-use guides::{guide_features, joint_upsample, VARIANCE_POOL};
 #[cfg(test)]
 use guides::pooled_variance;
+use guides::{guide_features, joint_upsample, VARIANCE_POOL};
+pub use guides::{tap_distances, two_sided_share, EdgeStopping, GuideGroup, GuideLevel};
 
 /// Sizes of one multi-scale column.
 #[derive(Config, Debug)]
@@ -147,7 +147,8 @@ impl MsKpConfig {
             }
             if l < self.kernel_scales {
                 let taps = (self.filter_size * self.filter_size) as u64;
-                let guide_channels: u64 = self.guides.iter().map(|g| g.len as u64 + 1 + if g.variance.is_some() { 2 * g.len as u64 + 3 } else { 0 }).sum();
+                let guide_channels: u64 =
+                    self.guides.iter().map(|g| g.len as u64 + 1 + if g.variance.is_some() { 2 * g.len as u64 + 3 } else { 0 }).sum();
                 total += (conv_macs(w[l], self.head_channels(l), 1) + (3 + guide_channels) * taps) as f64 / area;
             }
         }
@@ -214,8 +215,19 @@ impl MsKpConfig {
         );
         assert!(self.filter_size % 2 == 1, "filter size must be odd");
         for g in &self.guides {
-            assert!(g.len > 0 && g.start + g.len <= self.in_channels, "guide channels {}..{} outside the {} inputs", g.start, g.start + g.len, self.in_channels);
-            assert!(g.variance.is_none_or(|v| v < self.in_channels), "guide variance channel {:?} outside the {} inputs", g.variance, self.in_channels);
+            assert!(
+                g.len > 0 && g.start + g.len <= self.in_channels,
+                "guide channels {}..{} outside the {} inputs",
+                g.start,
+                g.start + g.len,
+                self.in_channels
+            );
+            assert!(
+                g.variance.is_none_or(|v| v < self.in_channels),
+                "guide variance channel {:?} outside the {} inputs",
+                g.variance,
+                self.in_channels
+            );
         }
         let hidden = Init::XavierUniform { gain: std::f64::consts::SQRT_2 };
         let block = |cin: usize, cout: usize, tag: u64| {
@@ -225,7 +237,9 @@ impl MsKpConfig {
         };
         let w = &self.widths;
         MsKpNet {
-            down: (0..self.levels()).map(|l| block(if l == 0 { self.in_channels } else { w[l - 1] }, w[l], 0x4d53_0100 + l as u64)).collect(),
+            down: (0..self.levels())
+                .map(|l| block(if l == 0 { self.in_channels } else { w[l - 1] }, w[l], 0x4d53_0100 + l as u64))
+                .collect(),
             up: (0..self.levels() - 1).map(|l| block(w[l + 1] + w[l], w[l], 0x4d53_0200 + l as u64)).collect(),
             heads: (0..self.kernel_scales)
                 .map(|s| {
@@ -245,7 +259,9 @@ impl MsKpConfig {
                         // caustics), and 2900 steps did not unlearn it (docs/denoiser.md).
                         let n = self.head_channels(s);
                         let first = n - self.guides.len();
-                        let bias: Vec<f32> = (0..n).map(|i| if i >= first { self.guides[i - first].init_log_strength.unwrap_or(GUIDE_STRENGTH_INIT) } else { 0.0 }).collect();
+                        let bias: Vec<f32> = (0..n)
+                            .map(|i| if i >= first { self.guides[i - first].init_log_strength.unwrap_or(GUIDE_STRENGTH_INIT) } else { 0.0 })
+                            .collect();
                         head.bias = burn::module::Param::from_tensor(Tensor::from_data(burn::tensor::TensorData::new(bias, [n]), device));
                     }
                     head
@@ -380,7 +396,9 @@ impl MsKpNet {
         for ((c, g), head) in pyramid.into_iter().zip(heads).rev() {
             let mut logits = head.logits;
             // Bounded so that exp stays finite; e^±12 spans any useful strength.
-            let strength = head.guide_strength.map(|s| if gain == 1.0 { s.clamp(-12.0, 12.0).exp() } else { s.clamp(-12.0, 12.0).exp().mul_scalar(gain) });
+            let strength =
+                head.guide_strength
+                    .map(|s| if gain == 1.0 { s.clamp(-12.0, 12.0).exp() } else { s.clamp(-12.0, 12.0).exp().mul_scalar(gain) });
             if let Some(strength) = &strength {
                 let k = crate::kernel::filter_size(logits.dims()[1]);
                 for (i, g) in g.iter().enumerate() {

@@ -4,7 +4,12 @@ use crate::test_util::{grad_of, max_abs, tensor, to_vec};
 use crate::{cpu_device, cpu_training_device};
 
 fn tiny(in_channels: usize) -> MsKpConfig {
-    MsKpConfig::new(in_channels).with_widths(vec![4, 6, 6]).with_kernel_scales(3).with_filter_size(3).with_margin(1).with_compositor(ScaleCompositor::LowPassSwap)
+    MsKpConfig::new(in_channels)
+        .with_widths(vec![4, 6, 6])
+        .with_kernel_scales(3)
+        .with_filter_size(3)
+        .with_margin(1)
+        .with_compositor(ScaleCompositor::LowPassSwap)
 }
 
 /// The hand count of a two-level, one-scale column.
@@ -38,7 +43,10 @@ fn edge_stopping_gradients_match_finite_differences() {
         let guides = vec![GuideGroup::new(0, 3, 1.0, false).brighter_only(), GuideGroup::new(3, 2, 2.0, false)];
         gradients_match_finite_differences_for(tiny(5).with_compositor(compositor).with_guides(guides));
         // Noise-normalised: the variance channel (4) is on the gradient path too.
-        let noisy = vec![GuideGroup::new(0, 3, 1.0, false).with_variance(4).with_init_log_strength(-1.0), GuideGroup::new(0, 3, 1.0, false).with_pooled_variance(4)];
+        let noisy = vec![
+            GuideGroup::new(0, 3, 1.0, false).with_variance(4).with_init_log_strength(-1.0),
+            GuideGroup::new(0, 3, 1.0, false).with_pooled_variance(4),
+        ];
         gradients_match_finite_differences_for(tiny(5).with_compositor(compositor).with_guides(noisy));
         // The fading two-sided test at GRADIENT_SPP blends both subtractions (share 1/3).
         let fading = vec![GuideGroup::new(0, 3, 1.0, false).with_variance(4).with_init_log_strength(-1.0).two_sided_fading()];
@@ -193,7 +201,15 @@ fn edge_stopping_keeps_a_guided_step_edge() {
     let dims = [1, 4, 16, 16];
     let side = |i: usize| (i % 16) < 7;
     let x: Vec<f64> = (0..dims.iter().product())
-        .map(|i| if i / 256 == 3 { f64::from(u8::from(side(i))) } else if side(i) { 0.02 } else { 1.0 })
+        .map(|i| {
+            if i / 256 == 3 {
+                f64::from(u8::from(side(i)))
+            } else if side(i) {
+                0.02
+            } else {
+                1.0
+            }
+        })
         .collect();
     for (strength, expect_sharp) in [(12.0f32, true), (-12.0, false)] {
         let mut net = cfg.init(1, &d);
@@ -232,7 +248,17 @@ fn a_feature_smaller_than_a_coarse_pixel_survives_the_convex_blend() {
     let d = cpu_device();
     let cfg = tiny(4).with_compositor(ScaleCompositor::ConvexBlend).with_guides(vec![GuideGroup::new(3, 1, 1.0, false)]);
     let dark = 7 * 16 + 9;
-    let x: Vec<f64> = (0..4 * 256).map(|i| if i / 256 == 3 { f64::from(u8::from(i % 256 == dark)) } else if i % 256 == dark { 0.02 } else { 1.0 }).collect();
+    let x: Vec<f64> = (0..4 * 256)
+        .map(|i| {
+            if i / 256 == 3 {
+                f64::from(u8::from(i % 256 == dark))
+            } else if i % 256 == dark {
+                0.02
+            } else {
+                1.0
+            }
+        })
+        .collect();
     let mut net = cfg.init(1, &d);
     set_constant_heads(&mut net, &cfg, identity_kernels_full_blend(&cfg, Some(12.0)));
     let worst = largest_change(&net, &cfg, &x, 16);
@@ -249,7 +275,17 @@ fn noise_normalised_colour_guide_stops_only_at_steps_the_noise_cannot_explain() 
     let cfg = tiny(4).with_guides(vec![GuideGroup::new(0, 3, 1.0, false).with_variance(3)]);
     let side = |i: usize| (i % 16) < 7;
     for (variance, expect_sharp) in [(1e-4, true), (10.0, false)] {
-        let x: Vec<f64> = (0..4 * 256).map(|i| if i / 256 == 3 { variance } else if side(i) { 0.02 } else { 1.0 }).collect();
+        let x: Vec<f64> = (0..4 * 256)
+            .map(|i| {
+                if i / 256 == 3 {
+                    variance
+                } else if side(i) {
+                    0.02
+                } else {
+                    1.0
+                }
+            })
+            .collect();
         let mut net = cfg.init(1, &d);
         set_constant_heads(&mut net, &cfg, box_kernels_no_blend(&cfg, None));
         let worst = largest_change(&net, &cfg, &x, 16);
@@ -309,12 +345,20 @@ fn one_sided_own_variance_guide_keeps_a_firefly_out_of_its_neighbours() {
     let fly = 7 * side + 8;
     let delta = 0.4;
     let x: Vec<f64> = (0..4 * n)
-        .map(|i| match (i / n, i % n == fly) { (3, true) => delta * delta * 63.0 / 64.0, (3, false) => 1e-6, (_, true) => 0.5 + delta, (_, false) => 0.5 })
+        .map(|i| match (i / n, i % n == fly) {
+            (3, true) => delta * delta * 63.0 / 64.0,
+            (3, false) => 1e-6,
+            (_, true) => 0.5 + delta,
+            (_, false) => 0.5,
+        })
         .collect();
     let neighbours_change = |group: GuideGroup| {
         let (out, cfg) = box_kernels_with_guide(&x, side, 64, group, 3.0);
         let o = side - 2 * cfg.margin;
-        (0..3 * o * o).filter(|i| (i % (o * o) / o + cfg.margin) * side + i % o + cfg.margin != fly).map(|i| (out[i] - 0.5).abs()).fold(0.0, f64::max)
+        (0..3 * o * o)
+            .filter(|i| (i % (o * o) / o + cfg.margin) * side + i % o + cfg.margin != fly)
+            .map(|i| (out[i] - 0.5).abs())
+            .fold(0.0, f64::max)
     };
     let one_sided = neighbours_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3));
     let two_sided = neighbours_change(GuideGroup::new(0, 3, 1.0, false).with_variance(3).two_sided());
@@ -335,7 +379,15 @@ fn joint_bilateral_upsampling_keeps_a_guided_edge_through_the_convex_blend() {
     let dims = [1, 4, 16, 16];
     let side = |i: usize| (i % 16) < 8;
     let x: Vec<f64> = (0..dims.iter().product())
-        .map(|i| if i / 256 == 3 { f64::from(u8::from(side(i))) } else if side(i) { 0.02 } else { 1.0 })
+        .map(|i| {
+            if i / 256 == 3 {
+                f64::from(u8::from(side(i)))
+            } else if side(i) {
+                0.02
+            } else {
+                1.0
+            }
+        })
         .collect();
     for (strength, expect_sharp) in [(12.0f32, true), (-12.0, false)] {
         let mut net = cfg.init(1, &d);
@@ -390,7 +442,13 @@ fn sparse_image_mean_change(seed: u64, spp: usize, lit_variance: f64, group: Gui
     let mut rng = SplitMix64::new(seed);
     let lit: Vec<bool> = (0..n).map(|_| rng.below(6) == 0).collect();
     let m = 3.0;
-    let x: Vec<f64> = (0..4 * n).map(|i| match (i / n, lit[i % n]) { (_, false) => 0.0, (3, true) => lit_variance * m * m, (_, true) => m }).collect();
+    let x: Vec<f64> = (0..4 * n)
+        .map(|i| match (i / n, lit[i % n]) {
+            (_, false) => 0.0,
+            (3, true) => lit_variance * m * m,
+            (_, true) => m,
+        })
+        .collect();
     let (out, cfg) = box_kernels_with_guide(&x, side, spp, group, 0.0);
     let o = side - 2 * cfg.margin;
     let boxed = |i: usize| {
@@ -444,7 +502,9 @@ fn largest_change(net: &MsKpNet, cfg: &MsKpConfig, x: &[f64], side: usize) -> f6
 #[test]
 fn any_size_runs() {
     let d = cpu_device();
-    let guided = tiny(4).with_compositor(ScaleCompositor::ConvexBlend).with_guides(vec![GuideGroup::new(0, 3, 1.0, true).brighter_only(), GuideGroup::new(3, 1, 1.0, false)]);
+    let guided = tiny(4)
+        .with_compositor(ScaleCompositor::ConvexBlend)
+        .with_guides(vec![GuideGroup::new(0, 3, 1.0, true).brighter_only(), GuideGroup::new(3, 1, 1.0, false)]);
     for (cfg, c) in [(tiny(3), 3), (guided, 4)] {
         let net = cfg.init(2, &d);
         for (h, w) in [(13, 9), (5, 7), (4, 4)] {
@@ -465,7 +525,17 @@ fn guide_gain_sharpens_a_converged_step_and_leaves_2spp_alone() {
     let d = cpu_device();
     let side = |i: usize| (i % 16) < 7;
     // A 0.98 step at variance 0.1: about 3.8 noise units per channel after the subtraction.
-    let x: Vec<f64> = (0..4 * 256).map(|i| if i / 256 == 3 { 0.1 } else if side(i) { 0.02 } else { 1.0 }).collect();
+    let x: Vec<f64> = (0..4 * 256)
+        .map(|i| {
+            if i / 256 == 3 {
+                0.1
+            } else if side(i) {
+                0.02
+            } else {
+                1.0
+            }
+        })
+        .collect();
     let run = |gamma: f64, spp: usize| {
         let cfg = tiny(4).with_guides(vec![GuideGroup::new(0, 3, 1.0, false).with_variance(3)]).with_guide_gain_exponent(gamma);
         let mut net = cfg.init(1, &d);

@@ -50,7 +50,11 @@ impl Dihedral {
         let last = p as isize - 1;
         let u = if self.mirror_x() { last - u } else { u };
         let v = if self.mirror_y() { last - v } else { v };
-        if self.transpose() { (v, u) } else { (u, v) }
+        if self.transpose() {
+            (v, u)
+        } else {
+            (u, v)
+        }
     }
 
     /// The symmetry that undoes this one.
@@ -113,7 +117,11 @@ pub fn cut_image(img: &PreparedImage, descriptors: Option<(&[f32], usize)>, x: u
             Some(match normal {
                 Some(n0) if (n0..n0 + 2).contains(&c) => {
                     let (a, b) = t.normal(buf[n0 * n + i], buf[(n0 + 1) * n + i]);
-                    if c == n0 { a } else { b }
+                    if c == n0 {
+                        a
+                    } else {
+                        b
+                    }
                 }
                 _ => buf[c * n + i],
             })
@@ -234,7 +242,13 @@ mod tests {
             if t != Dihedral::IDENTITY {
                 assert_ne!(a, img, "{t:?} moved nothing");
             }
-            let target = PreparedTarget { width: p, height: p, diffuse: img.diffuse[..3 * p * p].to_vec(), specular: img.g_block[..3 * p * p].to_vec(), total: img.specular[..3 * p * p].to_vec() };
+            let target = PreparedTarget {
+                width: p,
+                height: p,
+                diffuse: img.diffuse[..3 * p * p].to_vec(),
+                specular: img.g_block[..3 * p * p].to_vec(),
+                total: img.specular[..3 * p * p].to_vec(),
+            };
             let moved = cut_target(&target, 0, 0, p, t);
             assert_eq!(cut_target(&moved, 0, 0, p, t.inverse()), target);
         }
@@ -255,7 +269,11 @@ mod tests {
                 (corners.iter().map(|c| c.0).min().unwrap() as usize, corners.iter().map(|c| c.1).min().unwrap() as usize)
             };
             let wd = whole.descriptors.clone().unwrap();
-            assert_eq!(cut_image(&img, Some((&d, 2)), 2, 3, 6, t), cut_image(&whole, Some((&wd, 2)), u0, v0, 6, Dihedral::IDENTITY), "{t:?}");
+            assert_eq!(
+                cut_image(&img, Some((&d, 2)), 2, 3, 6, t),
+                cut_image(&whole, Some((&wd, 2)), u0, v0, 6, Dihedral::IDENTITY),
+                "{t:?}"
+            );
         }
     }
 

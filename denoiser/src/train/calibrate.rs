@@ -29,7 +29,13 @@ pub struct Calibration {
 /// Scores `model` on the validation shots of `data` with each exponent in turn (`progress`
 /// hears each result as it comes). `None` without validation shots or candidates. The model is
 /// left with the best exponent set.
-pub fn calibrate_guide_gain(model: &mut MethodModel, data: &Dataset, opts: &TrainOptions, exponents: &[f64], progress: &mut dyn FnMut(f64, &Validation)) -> Option<Calibration> {
+pub fn calibrate_guide_gain(
+    model: &mut MethodModel,
+    data: &Dataset,
+    opts: &TrainOptions,
+    exponents: &[f64],
+    progress: &mut dyn FnMut(f64, &Validation),
+) -> Option<Calibration> {
     let mut tried = Vec::with_capacity(exponents.len());
     for &g in exponents {
         model.set_guide_gain_exponent(g);

@@ -74,10 +74,17 @@ pub fn param_ids<M: Module>(model: &M) -> BTreeMap<String, u64> {
 /// Serialises the parameters to safetensors bytes with `metadata`.
 pub fn weights_bytes<M: Module>(model: &M, metadata: &BTreeMap<String, String>) -> Result<Vec<u8>, TrainError> {
     let params = parameters(model);
-    let bytes: Vec<(String, Vec<usize>, Vec<u8>)> = params.into_iter().map(|(p, _, s, v)| (p, s, v.iter().flat_map(|x| x.to_le_bytes()).collect())).collect();
+    let bytes: Vec<(String, Vec<usize>, Vec<u8>)> =
+        params.into_iter().map(|(p, _, s, v)| (p, s, v.iter().flat_map(|x| x.to_le_bytes()).collect())).collect();
     let views: Vec<(String, safetensors::tensor::TensorView)> = bytes
         .iter()
-        .map(|(p, s, b)| Ok((p.clone(), safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b).map_err(|e| TrainError::Checkpoint(format!("{p}: {e}")))?)))
+        .map(|(p, s, b)| {
+            Ok((
+                p.clone(),
+                safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b)
+                    .map_err(|e| TrainError::Checkpoint(format!("{p}: {e}")))?,
+            ))
+        })
         .collect::<Result<_, TrainError>>()?;
     let meta: HashMap<String, String> = metadata.clone().into_iter().collect();
     safetensors::serialize(views, Some(meta)).map_err(|e| TrainError::Checkpoint(e.to_string()))
@@ -117,7 +124,11 @@ impl ModuleMapper for Load<'_> {
         let mut p = param.map(|t| {
             let grad = t.is_require_grad();
             let n = Tensor::<D>::from_data(TensorData::new(values, shape), &t.device());
-            if grad { n.require_grad() } else { n }
+            if grad {
+                n.require_grad()
+            } else {
+                n
+            }
         });
         if let Some(id) = self.ids.and_then(|m| m.get(&path)) {
             p.id = ParamId::from(*id);
@@ -148,7 +159,11 @@ pub fn read_weights(path: &Path) -> Result<(NamedTensors, BTreeMap<String, Strin
 
 /// Loads weights into `model` (which fixes the architecture); extra tensors in the file are an
 /// error too, since they mean the file is for another method or size.
-pub fn load_weights<M: Module>(path: &Path, model: M, ids: Option<&BTreeMap<String, u64>>) -> Result<(M, BTreeMap<String, String>), TrainError> {
+pub fn load_weights<M: Module>(
+    path: &Path,
+    model: M,
+    ids: Option<&BTreeMap<String, u64>>,
+) -> Result<(M, BTreeMap<String, String>), TrainError> {
     let (tensors, meta) = read_weights(path)?;
     let mut l = Load { tensors, ids, path: Vec::new(), errors: Vec::new() };
     let model = model.map(&mut l);

@@ -72,7 +72,9 @@ pub fn read_index(root: &Path) -> Result<Vec<(String, String)>, TrainError> {
     let mut out = Vec::new();
     for (k, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
         let v: serde_json::Value = serde_json::from_str(line).map_err(|e| err(&path, format!("line {}: {e}", k + 1)))?;
-        let s = |f: &str| v.get(f).and_then(|x| x.as_str()).map(str::to_owned).ok_or_else(|| err(&path, format!("line {}: field `{f}` missing", k + 1)));
+        let s = |f: &str| {
+            v.get(f).and_then(|x| x.as_str()).map(str::to_owned).ok_or_else(|| err(&path, format!("line {}: field `{f}` missing", k + 1)))
+        };
         out.push((s("split")?, s("dir")?));
     }
     Ok(out)
@@ -170,12 +172,26 @@ impl Dataset {
         let ntrain = index.iter().filter(|(s, _)| s == "train").count().min(opts.max_train.unwrap_or(usize::MAX));
         let wanted: Vec<&(String, String)> = {
             let mut k = 0;
-            index.iter().filter(|(s, _)| if s == "train" { k += 1; k <= ntrain } else { s == "val" }).collect()
+            index
+                .iter()
+                .filter(|(s, _)| {
+                    if s == "train" {
+                        k += 1;
+                        k <= ntrain
+                    } else {
+                        s == "val"
+                    }
+                })
+                .collect()
         };
         for (i, (split, dir)) in wanted.iter().enumerate() {
             progress(i, wanted.len());
             let shot = load_shot(root, dir, &spps, opts)?;
-            if split == "val" { val.push(shot) } else { train.push(shot) }
+            if split == "val" {
+                val.push(shot)
+            } else {
+                train.push(shot)
+            }
         }
         progress(wanted.len(), wanted.len());
         let all: Vec<&Shot> = train.iter().chain(&val).collect();
@@ -194,11 +210,16 @@ impl Dataset {
 
     /// Bytes held by the prepared arrays (for the memory report).
     pub fn bytes(&self) -> usize {
-        let img = |i: &PreparedImage| 4 * (i.diffuse.len() + i.specular.len() + i.g_block.len() + i.path_weight.len()) + i.passthrough.len();
+        let img =
+            |i: &PreparedImage| 4 * (i.diffuse.len() + i.specular.len() + i.g_block.len() + i.path_weight.len()) + i.passthrough.len();
         self.train
             .iter()
             .chain(&self.val)
-            .map(|s| s.images.iter().map(img).sum::<usize>() + 4 * s.descriptors.as_ref().map_or(0, Vec::len) + 4 * 9 * s.target.width * s.target.height)
+            .map(|s| {
+                s.images.iter().map(img).sum::<usize>()
+                    + 4 * s.descriptors.as_ref().map_or(0, Vec::len)
+                    + 4 * 9 * s.target.width * s.target.height
+            })
             .sum()
     }
 }
@@ -226,8 +247,17 @@ pub fn cut(shot: &Shot, r: &PatchRef, spp: usize, patch: usize, margin: usize, w
 }
 
 /// Tensors of a batch.
-pub fn batch_tensors(shots: &[Shot], refs: &[PatchRef], spps: &[usize], patch: usize, margin: usize, with_descriptors: bool, device: &Device) -> (InputTensors, TargetTensors) {
-    let cuts: Vec<(PreparedImage, PreparedTarget)> = refs.iter().map(|r| cut(&shots[r.shot], r, spps[r.spp], patch, margin, with_descriptors)).collect();
+pub fn batch_tensors(
+    shots: &[Shot],
+    refs: &[PatchRef],
+    spps: &[usize],
+    patch: usize,
+    margin: usize,
+    with_descriptors: bool,
+    device: &Device,
+) -> (InputTensors, TargetTensors) {
+    let cuts: Vec<(PreparedImage, PreparedTarget)> =
+        refs.iter().map(|r| cut(&shots[r.shot], r, spps[r.spp], patch, margin, with_descriptors)).collect();
     let imgs: Vec<&PreparedImage> = cuts.iter().map(|c| &c.0).collect();
     let tgts: Vec<&PreparedTarget> = cuts.iter().map(|c| &c.1).collect();
     (PreparedImage::to_tensors(&imgs, device), PreparedTarget::to_tensors(&tgts, device))

@@ -106,13 +106,38 @@ impl TrainOptions {
 /// What the trainer reports while it runs.
 #[derive(Clone, Debug)]
 pub enum Event<'a> {
-    StageStart { index: usize, stage: &'a Stage, from_step: usize, steps_per_epoch: usize },
-    Step { stage: usize, step: usize, steps: usize, loss: f64, seconds: f64, patches: usize },
+    StageStart {
+        index: usize,
+        stage: &'a Stage,
+        from_step: usize,
+        steps_per_epoch: usize,
+    },
+    Step {
+        stage: usize,
+        step: usize,
+        steps: usize,
+        loss: f64,
+        seconds: f64,
+        patches: usize,
+    },
     /// `seconds`: wall time of the run so far, summed over resumed sessions (validation
     /// included), so curves can be drawn against time as well as steps.
-    Validation { stage: usize, step: usize, total_step: usize, rel_mse: f64, best: bool, seconds: f64 },
-    Checkpoint { path: &'a Path },
-    StageEnd { index: usize, steps: usize, reason: &'static str },
+    Validation {
+        stage: usize,
+        step: usize,
+        total_step: usize,
+        rel_mse: f64,
+        best: bool,
+        seconds: f64,
+    },
+    Checkpoint {
+        path: &'a Path,
+    },
+    StageEnd {
+        index: usize,
+        steps: usize,
+        reason: &'static str,
+    },
 }
 
 pub struct Outcome {
@@ -143,7 +168,9 @@ fn load_pretrained(path: &Path, want: Method, cfg: &DenoiserConfig, device: &Dev
     if l.method != want {
         return Err(TrainError::Options(format!("{}: holds a {} model, expected {want}", path.display(), l.method)));
     }
-    let sizes = |c: &DenoiserConfig| [serde_json::to_string(&c.kpcn), serde_json::to_string(&c.pathnet), serde_json::to_string(&c.mskp)].map(Result::unwrap_or_default);
+    let sizes = |c: &DenoiserConfig| {
+        [serde_json::to_string(&c.kpcn), serde_json::to_string(&c.pathnet), serde_json::to_string(&c.mskp)].map(Result::unwrap_or_default)
+    };
     if sizes(&l.config) != sizes(cfg) {
         return Err(TrainError::Options(format!(
             "{}: trained with other network sizes (preset `{}`) than this run's; pass the matching --preset",
@@ -156,7 +183,12 @@ fn load_pretrained(path: &Path, want: Method, cfg: &DenoiserConfig, device: &Dev
 
 /// The fresh or pretrained model a run starts from. Guided models (except Full-N-Full) take
 /// D_G from the G model and D_P + PathNet from the P model of each branch; E starts fresh.
-pub fn initial_model(opts: &TrainOptions, from_g: Option<&Path>, from_p: Option<&Path>, device: &Device) -> Result<MethodModel, TrainError> {
+pub fn initial_model(
+    opts: &TrainOptions,
+    from_g: Option<&Path>,
+    from_p: Option<&Path>,
+    device: &Device,
+) -> Result<MethodModel, TrainError> {
     let cfg = effective_config(opts);
     if opts.ablation.is_some() && opts.method != Method::Guided {
         return Err(TrainError::Options(format!("ablations apply to the guided method, not {}", opts.method)));
@@ -299,7 +331,12 @@ pub fn train_step(
 
 /// Adam as method.md §3: β = (0.9, 0.999), ε = 1e-8, no decay, gradient values clipped to ±1.
 pub fn optimizer() -> ModuleOptimizer {
-    AdamConfig::new().with_beta_1(0.9).with_beta_2(0.999).with_epsilon(1e-8).with_grad_clipping(Some(GradientClippingConfig::Value(1.0))).init()
+    AdamConfig::new()
+        .with_beta_1(0.9)
+        .with_beta_2(0.999)
+        .with_epsilon(1e-8)
+        .with_grad_clipping(Some(GradientClippingConfig::Value(1.0)))
+        .init()
 }
 
 /// The test relMSE ([`rel_mse_test`], what `pixguide eval` reports) over the fixed validation
@@ -360,7 +397,14 @@ pub fn validate_by_spp(model: &MethodModel, data: &Dataset, opts: &TrainOptions)
 
 /// Runs the schedule from `model` (or from the checkpoint in `ckpt_dir` when `resume` and one
 /// exists).
-pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Option<&Path>, resume: bool, events: &mut dyn FnMut(Event)) -> Result<Outcome, TrainError> {
+pub fn run(
+    data: &Dataset,
+    opts: &TrainOptions,
+    model: MethodModel,
+    ckpt_dir: Option<&Path>,
+    resume: bool,
+    events: &mut dyn FnMut(Event),
+) -> Result<Outcome, TrainError> {
     if opts.patch <= 2 * opts.config.margin() {
         return Err(TrainError::Options(format!("patch {} leaves no output with the {} px margin", opts.patch, opts.config.margin())));
     }
@@ -372,12 +416,25 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
     let started = Instant::now();
     let mut model = model;
     let mut optim = optimizer();
-    let mut st = RunState { stage: 0, step: 0, total_steps: 0, best_val: None, best_step: None, since_best: 0, elapsed: 0.0, param_ids: BTreeMap::new(), options: opts.fingerprint() };
+    let mut st = RunState {
+        stage: 0,
+        step: 0,
+        total_steps: 0,
+        best_val: None,
+        best_step: None,
+        since_best: 0,
+        elapsed: 0.0,
+        param_ids: BTreeMap::new(),
+        options: opts.fingerprint(),
+    };
     if let (Some(c), true) = (&ckpt, resume) {
         if c.state().exists() {
             let s = checkpoint::load_state(&c.state())?;
             if s.options != st.options {
-                return Err(TrainError::Checkpoint(format!("{} was written by a run with other options; use another --checkpoint-dir or the same options", c.state().display())));
+                return Err(TrainError::Checkpoint(format!(
+                    "{} was written by a run with other options; use another --checkpoint-dir or the same options",
+                    c.state().display()
+                )));
             }
             let (m, _) = checkpoint::load_weights(&c.weights(), model, Some(&s.param_ids))?;
             model = m;
@@ -439,13 +496,26 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
             let (m, loss) = match train_step(model, &mut optim, input, &target, stage, stage.lr_factor(st.step), &e_params, &mut rng) {
                 Ok(r) => r,
                 Err(loss) => {
-                    return Err(TrainError::NonFinite { loss, stage: stage.kind.name().into(), step: st.step, spp: data.spps[refs[0].spp], patches: describe(data, &refs) });
+                    return Err(TrainError::NonFinite {
+                        loss,
+                        stage: stage.kind.name().into(),
+                        step: st.step,
+                        spp: data.spps[refs[0].spp],
+                        patches: describe(data, &refs),
+                    });
                 }
             };
             model = m;
             st.step += 1;
             st.total_steps += 1;
-            events(Event::Step { stage: k, step: st.step, steps: stage.steps, loss: loss as f64, seconds: t0.elapsed().as_secs_f64(), patches: refs.len() });
+            events(Event::Step {
+                stage: k,
+                step: st.step,
+                steps: stage.steps,
+                loss: loss as f64,
+                seconds: t0.elapsed().as_secs_f64(),
+                patches: refs.len(),
+            });
             // A stage cut by the budget validates its last step too: the stage continues from
             // its best validated weights, so otherwise every step since the last validation
             // would be thrown away.
@@ -464,7 +534,14 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
                     } else {
                         st.since_best += 1;
                     }
-                    events(Event::Validation { stage: k, step: st.step, total_step: st.total_steps, rel_mse: v, best, seconds: elapsed(&started) });
+                    events(Event::Validation {
+                        stage: k,
+                        step: st.step,
+                        total_step: st.total_steps,
+                        rel_mse: v,
+                        best,
+                        seconds: elapsed(&started),
+                    });
                     if opts.patience.is_some_and(|p| st.since_best >= p) {
                         reason = "early stop";
                         break;
@@ -505,7 +582,13 @@ pub fn run(data: &Dataset, opts: &TrainOptions, model: MethodModel, ckpt_dir: Op
     Ok(Outcome { model, best_val: st.best_val, total_steps: st.total_steps, seconds: elapsed(&started), paused: false })
 }
 
-fn save_checkpoint(c: &CheckpointPaths, model: &MethodModel, optim: &ModuleOptimizer, st: &mut RunState, meta: &BTreeMap<String, String>) -> Result<(), TrainError> {
+fn save_checkpoint(
+    c: &CheckpointPaths,
+    model: &MethodModel,
+    optim: &ModuleOptimizer,
+    st: &mut RunState,
+    meta: &BTreeMap<String, String>,
+) -> Result<(), TrainError> {
     st.param_ids = checkpoint::param_ids(model);
     checkpoint::save_weights(&c.weights(), model, meta)?;
     checkpoint::save_optimizer(&c.optimizer(), optim)?;

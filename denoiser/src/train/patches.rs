@@ -49,8 +49,10 @@ pub fn sobel_magnitude(img: &[f32], w: usize, h: usize) -> Vec<f32> {
     let mut out = vec![0.0; w * h];
     for y in 0..h as isize {
         for x in 0..w as isize {
-            let gx = (at(x + 1, y - 1) + 2.0 * at(x + 1, y) + at(x + 1, y + 1)) - (at(x - 1, y - 1) + 2.0 * at(x - 1, y) + at(x - 1, y + 1));
-            let gy = (at(x - 1, y + 1) + 2.0 * at(x, y + 1) + at(x + 1, y + 1)) - (at(x - 1, y - 1) + 2.0 * at(x, y - 1) + at(x + 1, y - 1));
+            let gx =
+                (at(x + 1, y - 1) + 2.0 * at(x + 1, y) + at(x + 1, y + 1)) - (at(x - 1, y - 1) + 2.0 * at(x - 1, y) + at(x - 1, y + 1));
+            let gy =
+                (at(x - 1, y + 1) + 2.0 * at(x, y + 1) + at(x + 1, y + 1)) - (at(x - 1, y - 1) + 2.0 * at(x, y - 1) + at(x + 1, y - 1));
             out[y as usize * w + x as usize] = (gx * gx + gy * gy).sqrt();
         }
     }
@@ -89,13 +91,21 @@ pub fn importance_map(reference: &[f32], normal: &[f32], bounce0: &[[f32; 3]], w
             let l = lum(c).max(0.0);
             let t: Vec<f32> = c.iter().map(|&v| (v.max(0.0) / (1.0 + l / 1.5)).powf(1.0 / 2.2).clamp(0.0, 1.0)).collect();
             let v = lum(&t);
-            if v.is_finite() { v } else { 0.0 }
+            if v.is_finite() {
+                v
+            } else {
+                0.0
+            }
         })
         .collect();
     let nimg: Vec<f32> = (0..n)
         .map(|i| {
             let v = (normal[3 * i] + normal[3 * i + 1] + normal[3 * i + 2]) / 3.0 * 0.5 + 0.5;
-            if v.is_finite() { v } else { 0.5 }
+            if v.is_finite() {
+                v
+            } else {
+                0.5
+            }
         })
         .collect();
     let gt = edge_term(&tone, w, h, sigma);
@@ -218,7 +228,13 @@ mod tests {
         let normal = vec![0.0f32; 3 * w * h];
         for y in 0..h {
             for x in 0..w {
-                let v = if x < w / 2 { 0.5 } else if ((x / 8) + (y / 8)) % 2 == 0 { 2.0 } else { 0.0 };
+                let v = if x < w / 2 {
+                    0.5
+                } else if ((x / 8) + (y / 8)) % 2 == 0 {
+                    2.0
+                } else {
+                    0.0
+                };
                 reference[3 * (y * w + x)..3 * (y * w + x) + 3].fill(v);
             }
         }

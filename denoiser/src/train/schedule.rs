@@ -202,20 +202,53 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
     let path = |m: Method| if m.needs_descriptors() { o.w_path } else { 0.0 };
     match (method, ablation) {
         (Method::Guided, None) | (Method::Guided, Some(Ablation::RadianceOnly)) => {
-            vec![Stage { kind: StageKind::Joint, steps: o.joint_steps, lr_rest: Some(o.lr_joint_rest), lr_e: Some(o.lr_joint_e), w_path: o.w_path, shape: o.lr_shape }]
+            vec![Stage {
+                kind: StageKind::Joint,
+                steps: o.joint_steps,
+                lr_rest: Some(o.lr_joint_rest),
+                lr_e: Some(o.lr_joint_e),
+                w_path: o.w_path,
+                shape: o.lr_shape,
+            }]
         }
         (_, Some(Ablation::FixNTrain)) => {
             // Frozen PathNets get no L_path either.
-            vec![Stage { kind: StageKind::Joint, steps: o.joint_steps, lr_rest: None, lr_e: Some(o.lr_joint_e), w_path: 0.0, shape: o.lr_shape }]
+            vec![Stage {
+                kind: StageKind::Joint,
+                steps: o.joint_steps,
+                lr_rest: None,
+                lr_e: Some(o.lr_joint_e),
+                w_path: 0.0,
+                shape: o.lr_shape,
+            }]
         }
         (_, Some(Ablation::FullNFull)) => {
-            vec![Stage { kind: StageKind::Joint, steps: o.scratch_steps, lr_rest: Some(o.lr_scratch), lr_e: Some(o.lr_scratch), w_path: o.w_path, shape: o.lr_shape }]
+            vec![Stage {
+                kind: StageKind::Joint,
+                steps: o.scratch_steps,
+                lr_rest: Some(o.lr_scratch),
+                lr_e: Some(o.lr_scratch),
+                w_path: o.w_path,
+                shape: o.lr_shape,
+            }]
         }
         (m, _) => vec![
-            Stage { kind: StageKind::Branches, steps: o.branch_steps, lr_rest: Some(o.lr_branches), lr_e: None, w_path: path(m), shape: o.lr_shape },
+            Stage {
+                kind: StageKind::Branches,
+                steps: o.branch_steps,
+                lr_rest: Some(o.lr_branches),
+                lr_e: None,
+                w_path: path(m),
+                shape: o.lr_shape,
+            },
             Stage {
                 kind: o.finetune_loss.stage_kind(),
-                steps: o.finetune_steps, lr_rest: Some(o.lr_finetune), lr_e: None, w_path: 0.0, shape: o.lr_shape },
+                steps: o.finetune_steps,
+                lr_rest: Some(o.lr_finetune),
+                lr_e: None,
+                w_path: 0.0,
+                shape: o.lr_shape,
+            },
         ],
     }
 }
@@ -232,7 +265,14 @@ mod tests {
     /// Warm-up from 1/10 to the peak, then a monotone cosine to 1/50 at the last step.
     #[test]
     fn warmup_cosine_shape() {
-        let s = Stage { kind: StageKind::Branches, steps: 200, lr_rest: Some(1.0), lr_e: None, w_path: 0.0, shape: LrShape::WarmupCosine { warmup: 0.05 } };
+        let s = Stage {
+            kind: StageKind::Branches,
+            steps: 200,
+            lr_rest: Some(1.0),
+            lr_e: None,
+            w_path: 0.0,
+            shape: LrShape::WarmupCosine { warmup: 0.05 },
+        };
         assert!((s.lr_factor(0) - 0.1).abs() < 1e-12);
         assert!((s.lr_factor(10) - 1.0).abs() < 1e-12);
         assert!((s.lr_factor(199) - 0.02).abs() < 1e-3);

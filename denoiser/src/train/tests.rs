@@ -6,10 +6,10 @@ use crate::pathnet::PathNetConfig;
 use crate::preprocess::{prepare, prepare_target, PreparedImage};
 use checkpoint::flat_values;
 use data::Shot;
-use patches::PatchSampler;
-use schedule::LrShape;
 use film::descriptors::{field, FIELDS};
 use film::{Descriptors, Frame, PixelBuffer};
+use patches::PatchSampler;
+use schedule::LrShape;
 use schedule::ScheduleOptions;
 
 fn tiny() -> DenoiserConfig {
@@ -28,7 +28,13 @@ const PATCH: usize = 12;
 fn shot(name: &str, seed: u64, spps: &[usize]) -> Shot {
     let mut rng = SplitMix64::new(seed);
     let n = W * W;
-    let refc: Vec<f32> = (0..3 * n).map(|k| { let i = k / 3; let x = i % W; 0.2 + if x > W / 2 { 0.6 } else { 0.1 } + 0.05 * (k % 3) as f32 }).collect();
+    let refc: Vec<f32> = (0..3 * n)
+        .map(|k| {
+            let i = k / 3;
+            let x = i % W;
+            0.2 + if x > W / 2 { 0.6 } else { 0.1 } + 0.05 * (k % 3) as f32
+        })
+        .collect();
     let buf = |ch: usize, mean: Vec<f32>, var: f32| PixelBuffer { channels: ch, var: vec![var; mean.len()], mean };
     let max = *spps.iter().max().unwrap() as u32;
     let mut desc = Descriptors::new(W as u32, W as u32, max);
@@ -37,7 +43,8 @@ fn shot(name: &str, seed: u64, spps: &[usize]) -> Shot {
         *v = if (field::BOUNCE_TYPE..field::ROUGHNESS).contains(&f) { [4.0, 8.0, 17.0][rng.below(3)] } else { rng.next_f64() as f32 };
     }
     let noisy = |rng: &mut SplitMix64, s: usize| {
-        let mut noise = |v: &[f32], amp: f32| -> Vec<f32> { v.iter().map(|x| (x + amp * (rng.next_f64() as f32 - 0.5) / s as f32).max(0.0)).collect() };
+        let mut noise =
+            |v: &[f32], amp: f32| -> Vec<f32> { v.iter().map(|x| (x + amp * (rng.next_f64() as f32 - 0.5) / s as f32).max(0.0)).collect() };
         let diff: Vec<f32> = noise(&refc, 0.4).iter().map(|x| x * 0.7).collect();
         let spec: Vec<f32> = noise(&refc, 0.4).iter().map(|x| x * 0.3).collect();
         let rad: Vec<f32> = diff.iter().zip(&spec).map(|(a, b)| a + b).collect();
@@ -69,7 +76,13 @@ fn shot(name: &str, seed: u64, spps: &[usize]) -> Shot {
     let mut reference = noisy(&mut rng, 1_000_000);
     reference.radiance.mean = refc.clone();
     reference.diffuse.as_mut().unwrap().mean = refc.iter().map(|x| x * 0.7).collect();
-    Shot { name: name.into(), images, descriptors, target: prepare_target(&reference).unwrap(), sampler: PatchSampler::uniform(W, W, PATCH) }
+    Shot {
+        name: name.into(),
+        images,
+        descriptors,
+        target: prepare_target(&reference).unwrap(),
+        sampler: PatchSampler::uniform(W, W, PATCH),
+    }
 }
 
 fn dataset() -> Dataset {
@@ -283,10 +296,13 @@ fn guided_starts_from_pretrained_files_and_trains_them() {
     let (gp, g) = save(Method::G, 11);
     let (pp, p) = save(Method::P, 12);
     let start = initial_model(&o, Some(&gp), Some(&pp), &dev).unwrap();
-    let vals = |m: &Option<_>| m.as_ref().map(|x: &crate::column::Column| checkpoint::parameters(x).into_iter().flat_map(|t| t.3).collect::<Vec<f32>>());
+    let vals = |m: &Option<_>| {
+        m.as_ref().map(|x: &crate::column::Column| checkpoint::parameters(x).into_iter().flat_map(|t| t.3).collect::<Vec<f32>>())
+    };
     assert_eq!(vals(&start.diffuse.d_g), vals(&g.diffuse.d_g));
     assert_eq!(vals(&start.specular.d_p), vals(&p.specular.d_p));
-    let path_vals = |m: &MethodModel| checkpoint::parameters(m.diffuse.path.as_ref().unwrap()).into_iter().flat_map(|t| t.3).collect::<Vec<f32>>();
+    let path_vals =
+        |m: &MethodModel| checkpoint::parameters(m.diffuse.path.as_ref().unwrap()).into_iter().flat_map(|t| t.3).collect::<Vec<f32>>();
     assert_eq!(path_vals(&start), path_vals(&p));
     let e0 = checkpoint::parameters(start.diffuse.e.as_ref().unwrap()).into_iter().flat_map(|t| t.3).collect::<Vec<f32>>();
     let end = run(&data, &o, start, None, false, &mut |_| {}).unwrap().model;
@@ -332,7 +348,12 @@ fn time_budget_validates_the_last_step() {
 #[test]
 fn calibration_scores_each_exponent_and_keeps_the_lowest() {
     let data = dataset();
-    let unet = MsKpConfig::new(34).with_widths(vec![4, 6]).with_kernel_scales(2).with_filter_size(3).with_margin(1).with_edge_stopping(EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack);
+    let unet = MsKpConfig::new(34)
+        .with_widths(vec![4, 6])
+        .with_kernel_scales(2)
+        .with_filter_size(3)
+        .with_margin(1)
+        .with_edge_stopping(EdgeStopping::FeaturesAndFadingNoisyColourDoubtingBlack);
     let mut o = options(Method::G, None, &short());
     o.config = tiny().with_mskp(Some(unet));
     let mut model = MethodModel::init(&o.config, Method::G, &o.backend.training_device().unwrap());

@@ -22,7 +22,8 @@ pub fn tonemap_rgb8(rgb: &[f32], exposure: f32) -> Vec<u8> {
 }
 
 pub fn write_rgb8(path: &Path, width: u32, height: u32, rgb8: Vec<u8>) -> Result<()> {
-    let img = image::RgbImage::from_raw(width, height, rgb8).ok_or_else(|| Error::image(path, "buffer size does not match the image size"))?;
+    let img =
+        image::RgbImage::from_raw(width, height, rgb8).ok_or_else(|| Error::image(path, "buffer size does not match the image size"))?;
     let tmp = path.with_extension("partial.png");
     img.save(&tmp).map_err(|e| Error::image(&tmp, e))?;
     std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
@@ -53,7 +54,11 @@ pub fn normalised_rgb(values: &[f32], channels: usize, signed: bool) -> Vec<f32>
     } else {
         let k = ((mags.len() as f32 * 0.99) as usize).min(mags.len() - 1);
         let (_, p99, _) = mags.select_nth_unstable_by(k, f32::total_cmp);
-        if *p99 > 0.0 { 1.0 / *p99 } else { 1.0 }
+        if *p99 > 0.0 {
+            1.0 / *p99
+        } else {
+            1.0
+        }
     };
     (0..n).flat_map(|i| to_rgb(i).map(|v| (v * scale).clamp(0.0, 1.0))).collect()
 }

@@ -135,8 +135,7 @@ impl Bvh {
         if tris.is_empty() {
             return Bvh { nodes: Vec::new(), blocks: Vec::new(), stack_need: 0 };
         }
-        let obvhs_tris: Vec<Triangle> =
-            tris.iter().map(|t| Triangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() }).collect();
+        let obvhs_tris: Vec<Triangle> = tris.iter().map(|t| Triangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() }).collect();
         let indices: Vec<u32> = (0..tris.len() as u32).collect();
         let mut bvh2 = if params.pre_split {
             let mut aabbs: Vec<Aabb> = obvhs_tris.iter().map(|t| t.aabb()).collect();
@@ -477,11 +476,9 @@ impl<'a> Collapser<'a> {
             let mut kids = vec![nd.first_index, nd.first_index + 1];
             // Open the largest openable child until the node is full (greedy surface area).
             while kids.len() < W {
-                let best = kids
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, &k)| !self.is_leaf(k))
-                    .max_by(|a, b| self.bvh2.nodes[*a.1 as usize].aabb.half_area().total_cmp(&self.bvh2.nodes[*b.1 as usize].aabb.half_area()));
+                let best = kids.iter().enumerate().filter(|(_, &k)| !self.is_leaf(k)).max_by(|a, b| {
+                    self.bvh2.nodes[*a.1 as usize].aabb.half_area().total_cmp(&self.bvh2.nodes[*b.1 as usize].aabb.half_area())
+                });
                 let Some((j, &k)) = best else { break };
                 let f = self.bvh2.nodes[k as usize].first_index;
                 kids[j] = f;

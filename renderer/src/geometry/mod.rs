@@ -2,9 +2,9 @@
 //! a watertight ray/triangle test, and robust ray-origin offsets.
 
 pub mod bvh;
-pub mod triangle;
 #[cfg(test)]
 mod tests;
+pub mod triangle;
 
 use crate::math::Ray;
 use glam::{Vec2, Vec3};
@@ -104,9 +104,7 @@ impl Accel {
     /// Closest hit with t in (0, tmax).
     #[inline]
     pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<Hit> {
-        self.bvh
-            .intersect(ray.origin, ray.dir, tmax)
-            .map(|(t, prim, b1, b2)| Hit { t, prim, bary: Vec2::new(b1, b2) })
+        self.bvh.intersect(ray.origin, ray.dir, tmax).map(|(t, prim, b1, b2)| Hit { t, prim, bary: Vec2::new(b1, b2) })
     }
 
     /// Any hit with t in (0, tmax) (shadow rays).
@@ -148,7 +146,11 @@ pub fn offset_ray_origin(p: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
             let steps = (INT_SCALE * n[i]) as i32;
             let bits = pi.to_bits() as i32;
             let stepped = f32::from_bits(if pi < 0.0 { bits - steps } else { bits + steps } as u32);
-            if stepped.is_finite() { stepped } else { pi }
+            if stepped.is_finite() {
+                stepped
+            } else {
+                pi
+            }
         };
     }
     out
@@ -180,7 +182,11 @@ impl Mesh {
     pub fn area(&self, i: usize) -> f32 {
         let [p0, p1, p2] = self.triangle(i);
         let a = 0.5 * (p1 - p0).cross(p2 - p0).length();
-        if a.is_finite() { a } else { 0.0 }
+        if a.is_finite() {
+            a
+        } else {
+            0.0
+        }
     }
 
     /// Axis-aligned bounds of all vertices used by triangles.

@@ -258,7 +258,14 @@ fn offset_origin_avoids_self_hits_and_leaks() {
         // Facing quads z = 0 (normal +z) and z = gap (normal -z), gap = 1e-3 of the scene scale.
         let gap = 1e-3 * scale;
         let base = Vec3::new(0.2, 0.4, 0.3) * scale;
-        let q = |z: f32| [base + Vec3::new(0.0, 0.0, z), base + Vec3::new(scale, 0.0, z), base + Vec3::new(scale, scale, z), base + Vec3::new(0.0, scale, z)];
+        let q = |z: f32| {
+            [
+                base + Vec3::new(0.0, 0.0, z),
+                base + Vec3::new(scale, 0.0, z),
+                base + Vec3::new(scale, scale, z),
+                base + Vec3::new(0.0, scale, z),
+            ]
+        };
         let (lo, hi) = (q(0.0), q(gap));
         let mut positions = lo.to_vec();
         positions.extend_from_slice(&hi);
@@ -282,4 +289,3 @@ fn offset_origin_avoids_self_hits_and_leaks() {
         }
     }
 }
-

@@ -51,7 +51,17 @@ impl RayShear {
 #[inline(always)]
 pub fn shear_axes(dir: Vec3) -> Option<([usize; 3], [f32; 3])> {
     let a = dir.abs();
-    let kz = if a.x > a.y { if a.x > a.z { 0 } else { 2 } } else if a.y > a.z { 1 } else { 2 };
+    let kz = if a.x > a.y {
+        if a.x > a.z {
+            0
+        } else {
+            2
+        }
+    } else if a.y > a.z {
+        1
+    } else {
+        2
+    };
     if a[kz] == 0.0 {
         return None;
     }

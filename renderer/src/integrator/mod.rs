@@ -57,12 +57,7 @@ pub struct RenderStats {
 impl RenderStats {
     pub fn summary(&self) -> String {
         let s = self.wall.as_secs_f64().max(1e-9);
-        format!(
-            "{:.2} s wall, {:.3} M samples/s, {:.3} M rays/s",
-            s,
-            self.samples as f64 / s / 1e6,
-            self.rays as f64 / s / 1e6
-        )
+        format!("{:.2} s wall, {:.3} M samples/s, {:.3} M rays/s", s, self.samples as f64 / s / 1e6, self.rays as f64 / s / 1e6)
     }
 }
 

@@ -161,11 +161,8 @@ pub fn trace(scene: &Scene, ray: Ray, rng: &mut Pcg32, max_bounces: u32, russian
                 let f = if bsdf.is_transmissive() || same_side { f } else { Default::default() };
                 if f.total().max_element() > 0.0 {
                     let origin = offset_ray_origin(si.p, si.ng, ls.wi);
-                    let tmax = if ls.dist.is_finite() {
-                        (si.p + ls.wi * ls.dist - origin).length() * (1.0 - SHADOW_EPS)
-                    } else {
-                        f32::INFINITY
-                    };
+                    let tmax =
+                        if ls.dist.is_finite() { (si.p + ls.wi * ls.dist - origin).length() * (1.0 - SHADOW_EPS) } else { f32::INFINITY };
                     out.rays += 1;
                     if !scene.accel.occluded(&Ray::new(origin, ls.wi), tmax) {
                         let w = power_heuristic(ls.pdf, bsdf.pdf(wo, wi));

@@ -8,7 +8,11 @@ pub(crate) const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
 
 /// Maps any input (NaN included) into [0, 1).
 fn sanitize_u(u: f32) -> f32 {
-    if u >= 0.0 { u.min(ONE_MINUS_EPSILON) } else { 0.0 }
+    if u >= 0.0 {
+        u.min(ONE_MINUS_EPSILON)
+    } else {
+        0.0
+    }
 }
 
 /// A step function over `n` equal cells of [0, 1), sampled by inverting its CDF.
@@ -24,10 +28,7 @@ pub(crate) struct Distribution1D {
 impl Distribution1D {
     /// Negative and non-finite weights count as 0. Returns `None` if nothing is positive.
     pub fn new(weights: impl IntoIterator<Item = f64>) -> Option<Distribution1D> {
-        let func: Vec<f32> = weights
-            .into_iter()
-            .map(|w| if w.is_finite() && w > 0.0 { (w as f32).min(f32::MAX) } else { 0.0 })
-            .collect();
+        let func: Vec<f32> = weights.into_iter().map(|w| if w.is_finite() && w > 0.0 { (w as f32).min(f32::MAX) } else { 0.0 }).collect();
         let sum: f64 = func.iter().map(|&f| f as f64).sum();
         if !(sum > 0.0) || !sum.is_finite() {
             return None;

@@ -76,7 +76,11 @@ impl EnvLight {
         match env {
             Environment::Constant(c) => {
                 let c = sanitize(c);
-                if c.max_element() > 0.0 { EnvLight::Constant(c) } else { EnvLight::Black }
+                if c.max_element() > 0.0 {
+                    EnvLight::Constant(c)
+                } else {
+                    EnvLight::Black
+                }
             }
             Environment::Map { image, rotation_deg, scale } => {
                 let (w, h) = (image.width as usize, image.height as usize);
@@ -84,8 +88,7 @@ impl EnvLight {
                     return EnvLight::Black;
                 }
                 let scale = if scale.is_finite() && scale > 0.0 { scale } else { 0.0 };
-                let texels: Vec<Vec3> =
-                    image.texels.iter().map(|&t| (sanitize(t) * scale).min(Vec3::splat(f32::MAX))).collect();
+                let texels: Vec<Vec3> = image.texels.iter().map(|&t| (sanitize(t) * scale).min(Vec3::splat(f32::MAX))).collect();
                 let mut lum: Vec<f32> = texels.iter().map(|&t| luminance64(t).min(f32::MAX as f64) as f32).collect();
                 let sin_row = |y: usize| ((y as f64 + 0.5) / h as f64 * std::f64::consts::PI).sin();
                 // Σ L sin θ ΔθΔφ / 4π with Δθ = π/H, Δφ = 2π/W.
@@ -93,8 +96,8 @@ impl EnvLight {
                 for y in 0..h {
                     acc += texels[y * w..(y + 1) * w].iter().map(|&t| luminance64(t)).sum::<f64>() * sin_row(y);
                 }
-                let mean_luminance = acc * (std::f64::consts::PI / h as f64) * (2.0 * std::f64::consts::PI / w as f64)
-                    / (4.0 * std::f64::consts::PI);
+                let mean_luminance =
+                    acc * (std::f64::consts::PI / h as f64) * (2.0 * std::f64::consts::PI / w as f64) / (4.0 * std::f64::consts::PI);
                 // Mean of the bilinear reconstruction over each texel: per axis the texel keeps ¾ of
                 // its own value and gets ⅛ of each neighbour's (wrapping in u, clamped in v).
                 // f32 buffers, reused, keep an 8k map's transient memory at 8 bytes per texel.
@@ -235,7 +238,11 @@ impl EnvMap {
         let b = self.texel(x0, y0 + 1).lerp(self.texel(x0 + 1, y0 + 1), fx);
         let c = a.lerp(b, fy);
         // Lerping two texels near f32::MAX may overflow.
-        if c.is_finite() { c } else { Vec3::splat(f32::MAX).min(c.max(Vec3::ZERO)) }
+        if c.is_finite() {
+            c
+        } else {
+            Vec3::splat(f32::MAX).min(c.max(Vec3::ZERO))
+        }
     }
 
     fn pdf(&self, dir: Vec3) -> f32 {
@@ -245,6 +252,10 @@ impl EnvMap {
             return 0.0;
         }
         let pdf = self.dist.pdf(uv) / (2.0 * PI * PI * sin_theta);
-        if pdf.is_finite() { pdf } else { 0.0 }
+        if pdf.is_finite() {
+            pdf
+        } else {
+            0.0
+        }
     }
 }

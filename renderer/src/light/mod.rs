@@ -103,11 +103,8 @@ impl Lights {
                 s.clamp(MIN_KIND_SHARE as f64, 1.0 - MIN_KIND_SHARE as f64)
             }
         };
-        let mut weights: Vec<f64> = if tri_total > 0.0 {
-            tri_power.iter().map(|p| p / tri_total * (1.0 - env_share)).collect()
-        } else {
-            Vec::new()
-        };
+        let mut weights: Vec<f64> =
+            if tri_total > 0.0 { tri_power.iter().map(|p| p / tri_total * (1.0 - env_share)).collect() } else { Vec::new() };
         if !env.is_black() {
             weights.push(env_share);
         }
@@ -164,6 +161,10 @@ impl Lights {
     /// Density (solid angle, selection included) with which `sample` picks environment direction `dir`.
     pub fn env_pdf(&self, dir: Vec3) -> f32 {
         let pmf = self.env_pmf();
-        if pmf > 0.0 { pmf * self.env.pdf(dir) } else { 0.0 }
+        if pmf > 0.0 {
+            pmf * self.env.pdf(dir)
+        } else {
+            0.0
+        }
     }
 }

@@ -3,9 +3,9 @@
 //! and degenerate inputs.
 
 use super::*;
+use crate::material::{ColorParam, MaterialKind};
 use crate::math::PI;
 use crate::rng::Pcg32;
-use crate::material::{ColorParam, MaterialKind};
 
 fn material(emission: Vec3, two_sided: bool) -> Material {
     Material {
@@ -19,12 +19,7 @@ fn material(emission: Vec3, two_sided: bool) -> Material {
 
 /// Axis-aligned square `[x0, x0+s] × [z0, z0+s]` at height `y`, wound so its normal is −Y.
 fn add_square(mesh: &mut Mesh, x0: f32, z0: f32, y: f32, s: f32, mat: u32) {
-    let p = [
-        Vec3::new(x0, y, z0),
-        Vec3::new(x0 + s, y, z0),
-        Vec3::new(x0 + s, y, z0 + s),
-        Vec3::new(x0, y, z0 + s),
-    ];
+    let p = [Vec3::new(x0, y, z0), Vec3::new(x0 + s, y, z0), Vec3::new(x0 + s, y, z0 + s), Vec3::new(x0, y, z0 + s)];
     mesh.append(&p, &[], &[], &[[0, 1, 2], [0, 2, 3]], mat);
 }
 
@@ -257,12 +252,7 @@ fn square_light_plus_env_irradiance_matches_lambert_formula() {
     let lights = Lights::build(&mesh, &[material(le, false)], Environment::Constant(c));
     let p = Vec3::new(0.1, 0.0, 0.05);
     let n = Vec3::Y;
-    let verts = [
-        Vec3::new(-0.3, 1.0, -0.2),
-        Vec3::new(0.7, 1.0, -0.2),
-        Vec3::new(0.7, 1.0, 0.8),
-        Vec3::new(-0.3, 1.0, 0.8),
-    ];
+    let verts = [Vec3::new(-0.3, 1.0, -0.2), Vec3::new(0.7, 1.0, -0.2), Vec3::new(0.7, 1.0, 0.8), Vec3::new(-0.3, 1.0, 0.8)];
     // Lights are sampled without visibility, so the estimator's mean is the sum of both
     // unoccluded integrals: the square's irradiance plus π·c from the upper hemisphere.
     let want = le.y as f64 * polygon_irradiance(p, n, &verts) + PI as f64 * c.y as f64;

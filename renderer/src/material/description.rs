@@ -14,11 +14,19 @@ use glam::{Affine2, Vec2, Vec3};
 pub enum ColorParam {
     Const(Vec3),
     /// `textures[index]` times `scale`, bilinear and repeating, looked up at `to_uv(uv)`.
-    Texture { index: u32, scale: Vec3, to_uv: Affine2 },
+    Texture {
+        index: u32,
+        scale: Vec3,
+        to_uv: Affine2,
+    },
     /// Mitsuba's `checkerboard`: with (s, t) = `to_uv(uv)`, `color0` where the fractional parts
     /// of s and t are on the same side of ½ (both ≤ ½ or both > ½), else `color1`; so
     /// uv (0, 0) is `color0` and one period of the pattern spans one unit of s and t.
-    Checkerboard { color0: Vec3, color1: Vec3, to_uv: Affine2 },
+    Checkerboard {
+        color0: Vec3,
+        color1: Vec3,
+        to_uv: Affine2,
+    },
 }
 
 impl ColorParam {
@@ -52,11 +60,30 @@ impl ColorParam {
 /// The BSDF of a material, before texture lookups.
 #[derive(Clone, Debug)]
 pub enum MaterialKind {
-    Lambert { albedo: ColorParam },
-    Conductor { eta: Vec3, k: Vec3, roughness: f32, specular_tint: ColorParam, dist: Distribution },
-    Dielectric { ior: f32, roughness: f32, tint: Vec3, dist: Distribution },
+    Lambert {
+        albedo: ColorParam,
+    },
+    Conductor {
+        eta: Vec3,
+        k: Vec3,
+        roughness: f32,
+        specular_tint: ColorParam,
+        dist: Distribution,
+    },
+    Dielectric {
+        ior: f32,
+        roughness: f32,
+        tint: Vec3,
+        dist: Distribution,
+    },
     /// `nonlinear`: see `Bsdf::Plastic` (true in our formats; Mitsuba's `nonlinear`, default false).
-    Plastic { albedo: ColorParam, ior: f32, roughness: f32, dist: Distribution, nonlinear: bool },
+    Plastic {
+        albedo: ColorParam,
+        ior: f32,
+        roughness: f32,
+        dist: Distribution,
+        nonlinear: bool,
+    },
 }
 
 /// A named material. `roughness` values above are GGX alpha. Non-zero `emission` makes every
@@ -94,10 +121,16 @@ impl Material {
         let alpha = |r: f32| if r < MIN_ALPHA { 0.0 } else { r.min(1.0) };
         match &self.kind {
             MaterialKind::Lambert { albedo } => Bsdf::Lambert { albedo: color(albedo).clamp(Vec3::ZERO, Vec3::ONE) },
-            MaterialKind::Conductor { eta, k, roughness, specular_tint, dist } => {
-                Bsdf::Conductor { eta: *eta, k: *k, alpha: alpha(*roughness), specular_tint: color(specular_tint).min(Vec3::ONE), dist: *dist }
+            MaterialKind::Conductor { eta, k, roughness, specular_tint, dist } => Bsdf::Conductor {
+                eta: *eta,
+                k: *k,
+                alpha: alpha(*roughness),
+                specular_tint: color(specular_tint).min(Vec3::ONE),
+                dist: *dist,
+            },
+            MaterialKind::Dielectric { ior, roughness, tint, dist } => {
+                Bsdf::Dielectric { eta: *ior, alpha: alpha(*roughness), tint: *tint, dist: *dist }
             }
-            MaterialKind::Dielectric { ior, roughness, tint, dist } => Bsdf::Dielectric { eta: *ior, alpha: alpha(*roughness), tint: *tint, dist: *dist },
             MaterialKind::Plastic { albedo, ior, roughness, dist, nonlinear } => Bsdf::Plastic {
                 albedo: color(albedo).clamp(Vec3::ZERO, Vec3::ONE),
                 eta: *ior,

@@ -28,8 +28,8 @@ mod tests;
 use conductor::Conductor;
 pub use description::{ColorParam, Material, MaterialKind};
 use dielectric::Dielectric;
-use plastic::Plastic;
 pub use microfacet::Distribution;
+use plastic::Plastic;
 
 /// What kind of lobe produced a sample; mirrors the renderer bitmask of method.md §1.1.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -234,7 +234,9 @@ impl Bsdf {
                 tint: colour(tint),
                 dist,
             }),
-            Bsdf::Plastic { albedo, eta, alpha, dist, nonlinear } => Resolved::Plastic(Plastic::new(colour(albedo), eta, alpha, dist, nonlinear)),
+            Bsdf::Plastic { albedo, eta, alpha, dist, nonlinear } => {
+                Resolved::Plastic(Plastic::new(colour(albedo), eta, alpha, dist, nonlinear))
+            }
         }
     }
 

@@ -118,7 +118,13 @@ fn tables(dist: Distribution) -> &'static Tables {
                 let mut s = 0.0f64;
                 for k in 0..=n {
                     let mu = k as f64 / n as f64;
-                    let w = if k == 0 || k == n { 1.0 } else if k % 2 == 1 { 4.0 } else { 2.0 };
+                    let w = if k == 0 || k == n {
+                        1.0
+                    } else if k % 2 == 1 {
+                        4.0
+                    } else {
+                        2.0
+                    };
                     s += w * fresnel::dielectric(mu as f32, eta) as f64 * mu;
                 }
                 (2.0 * s / (3.0 * n as f64)) as f32

@@ -4,7 +4,7 @@
 
 use super::image_io;
 use super::primitives::TriMesh;
-use super::{Material, MaterialKind, ColorParam, RenderSettings, SceneDescription};
+use super::{ColorParam, Material, MaterialKind, RenderSettings, SceneDescription};
 use crate::camera::Camera;
 use crate::geometry::Mesh;
 use crate::light::Environment;
@@ -108,7 +108,11 @@ impl Builder {
     pub fn add_mesh(&mut self, m: &TriMesh, material: u32, field: &str) -> Result<()> {
         let n = m.positions.len();
         if let Some(i) = m.positions.iter().position(|p| !p.is_finite()) {
-            return Err(Error::scene(&self.file, field, format!("vertex {i} position {} is not finite (after the transform)", m.positions[i])));
+            return Err(Error::scene(
+                &self.file,
+                field,
+                format!("vertex {i} position {} is not finite (after the transform)", m.positions[i]),
+            ));
         }
         if let Some(i) = m.normals.iter().position(|p| !p.is_finite()) {
             return Err(Error::scene(&self.file, field, format!("vertex {i} normal is not finite")));

@@ -51,8 +51,9 @@ pub fn load_scene(path: &Path) -> Result<SceneDescription> {
         Some(c) => {
             let aspect = c.aspect.filter(|a| a.is_finite() && *a > 0.0).unwrap_or(1.0);
             let width = ((DEFAULT_HEIGHT as f32 * aspect).round() as u32).clamp(1, MAX_RESOLUTION_SIDE);
-            crate::camera::Camera::look_at(c.position, c.position + c.forward, c.up, c.yfov_deg, width, DEFAULT_HEIGHT)
-                .ok_or_else(|| Error::scene(path, format!("cameras[{}]", c.index), "degenerate camera (zero direction or fov outside (0°, 180°))"))?
+            crate::camera::Camera::look_at(c.position, c.position + c.forward, c.up, c.yfov_deg, width, DEFAULT_HEIGHT).ok_or_else(
+                || Error::scene(path, format!("cameras[{}]", c.index), "degenerate camera (zero direction or fov outside (0°, 180°))"),
+            )?
         }
         None => {
             warn(path, "no perspective camera; using one that frames the scene bounds");
@@ -115,7 +116,9 @@ pub(crate) fn load(b: &mut Builder, path: &Path, transform: &Mat4, choice: &Mate
                             index: cam.index(),
                         })
                     }
-                    gltf::camera::Projection::Orthographic(_) => warn(&b.file, format!("{field}: orthographic cameras[{}] ignored", cam.index())),
+                    gltf::camera::Projection::Orthographic(_) => {
+                        warn(&b.file, format!("{field}: orthographic cameras[{}] ignored", cam.index()))
+                    }
                 }
             }
         }
@@ -184,7 +187,13 @@ impl Ctx {
         let ior = m.ior().unwrap_or(1.5);
         let transmission = m.transmission().map_or(0.0, |t| t.transmission_factor());
         let strength = m.emissive_strength().unwrap_or(1.0);
-        for (what, v) in [("metallicFactor", metallic), ("roughnessFactor", roughness), ("ior", ior), ("transmissionFactor", transmission), ("emissiveStrength", strength)] {
+        for (what, v) in [
+            ("metallicFactor", metallic),
+            ("roughnessFactor", roughness),
+            ("ior", ior),
+            ("transmissionFactor", transmission),
+            ("emissiveStrength", strength),
+        ] {
             if !v.is_finite() || v < 0.0 {
                 return Err(Error::scene(&b.file, field, format!("{what} {v} must be finite and non-negative")));
             }
@@ -203,7 +212,13 @@ impl Ctx {
         };
         let mean_base = base * base_tex.map_or(Vec3::ONE, |t| b.textures[t as usize].mean());
         let kind = if metallic >= 0.5 {
-            MaterialKind::Conductor { eta: Vec3::ONE, k: Vec3::splat(20.0), roughness: alpha, specular_tint: ColorParam::Const(mean_base), dist: Default::default() }
+            MaterialKind::Conductor {
+                eta: Vec3::ONE,
+                k: Vec3::splat(20.0),
+                roughness: alpha,
+                specular_tint: ColorParam::Const(mean_base),
+                dist: Default::default(),
+            }
         } else if transmission >= 0.5 {
             MaterialKind::Dielectric { ior, roughness: alpha, tint: mean_base, dist: Default::default() }
         } else if roughness < 0.9 {
@@ -218,7 +233,13 @@ impl Ctx {
         }
         let emission = check(b, "emission (factor × strength)", emission)?;
         let index = m.index().unwrap_or(0);
-        Ok(Material { name: m.name().map_or_else(|| format!("gltf material {index}"), str::to_string), kind, emission, two_sided_emission: m.double_sided(), one_sided: false })
+        Ok(Material {
+            name: m.name().map_or_else(|| format!("gltf material {index}"), str::to_string),
+            kind,
+            emission,
+            two_sided_emission: m.double_sided(),
+            one_sided: false,
+        })
     }
 
     fn texture(&mut self, b: &mut Builder, t: &gltf::Texture, field: &str) -> Result<u32> {
@@ -229,7 +250,8 @@ impl Ctx {
         let name = format!("images[{}]", image.index());
         let i = match image.source() {
             gltf::image::Source::View { view, .. } => {
-                let bytes = view_bytes(&view, &self.buffers).ok_or_else(|| Error::scene(&b.file, field, format!("{name}: buffer view out of range")))?;
+                let bytes = view_bytes(&view, &self.buffers)
+                    .ok_or_else(|| Error::scene(&b.file, field, format!("{name}: buffer view out of range")))?;
                 let tex = image_io::decode_image(bytes, &name, &b.file, field)?;
                 b.add_texture(tex)
             }
@@ -315,7 +337,11 @@ fn check_position_accessors(root: &gltf::json::Root) -> std::result::Result<(), 
         for (p, prim) in mesh.primitives.iter().enumerate() {
             if let Some(i) = prim.attributes.get(&semantic) {
                 if i.value() >= root.accessors.len() {
-                    return Err(format!("meshes[{m}].primitives[{p}].attributes.POSITION: accessor {} does not exist ({} accessors)", i.value(), root.accessors.len()));
+                    return Err(format!(
+                        "meshes[{m}].primitives[{p}].attributes.POSITION: accessor {} does not exist ({} accessors)",
+                        i.value(),
+                        root.accessors.len()
+                    ));
                 }
             }
         }

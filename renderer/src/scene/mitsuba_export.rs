@@ -24,7 +24,11 @@ pub fn export_mitsuba(scene: &Scene, dir: &Path) -> Result<PathBuf> {
     let c = &scene.camera;
     // Mitsuba's camera looks down +z with +x to the left.
     let left = -c.right;
-    let m = [[left.x, c.up.x, c.forward.x, c.position.x], [left.y, c.up.y, c.forward.y, c.position.y], [left.z, c.up.z, c.forward.z, c.position.z]];
+    let m = [
+        [left.x, c.up.x, c.forward.x, c.position.x],
+        [left.y, c.up.y, c.forward.y, c.position.y],
+        [left.z, c.up.z, c.forward.z, c.position.z],
+    ];
     let axis = match c.fov_axis {
         FovAxis::X => "x",
         FovAxis::Y => "y",
@@ -50,7 +54,9 @@ pub fn export_mitsuba(scene: &Scene, dir: &Path) -> Result<PathBuf> {
             continue;
         }
         let bsdf = match &material.kind {
-            MaterialKind::Lambert { albedo: ColorParam::Const(a) } => format!("<bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"{}\"/></bsdf>", rgb(*a)),
+            MaterialKind::Lambert { albedo: ColorParam::Const(a) } => {
+                format!("<bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"{}\"/></bsdf>", rgb(*a))
+            }
             other => return Err(unsupported(format!("material {:?} ({other:?})", material.name))),
         };
         let emitter = if material.is_emissive() {
@@ -81,7 +87,10 @@ pub fn export_mitsuba(scene: &Scene, dir: &Path) -> Result<PathBuf> {
         let file = format!("material{mi}.obj");
         let path = dir.join(&file);
         std::fs::write(&path, obj).map_err(|e| Error::io(&path, e))?;
-        let _ = writeln!(xml, "  <shape type=\"obj\"><string name=\"filename\" value=\"{file}\"/><bsdf type=\"twosided\">{bsdf}</bsdf>{emitter}</shape>");
+        let _ = writeln!(
+            xml,
+            "  <shape type=\"obj\"><string name=\"filename\" value=\"{file}\"/><bsdf type=\"twosided\">{bsdf}</bsdf>{emitter}</shape>"
+        );
     }
     xml.push_str("</scene>\n");
     let path = dir.join("scene.xml");

@@ -140,7 +140,11 @@ impl Scene {
         } else {
             let n = m.normals[a] * b0 + m.normals[b] * b1 + m.normals[c] * b2;
             let n = n.normalize_or_zero();
-            if n == Vec3::ZERO || !n.is_finite() { ng } else { n }
+            if n == Vec3::ZERO || !n.is_finite() {
+                ng
+            } else {
+                n
+            }
         };
         let uv = if m.uvs.is_empty() { Vec2::ZERO } else { m.uvs[a] * b0 + m.uvs[b] * b1 + m.uvs[c] * b2 };
         SurfaceHit { p, ng, ns, uv, prim: hit.prim, material: m.material[i] }

@@ -155,7 +155,13 @@ fn convert_material(b: &mut Builder, mtl: &tobj::Material, mtl_dir: &Path, field
         }
         None => ColorParam::Const(kd.min(Vec3::ONE)),
     };
-    Ok(Material { name: mtl.name.clone(), kind: MaterialKind::Lambert { albedo }, emission: ke, two_sided_emission: false, one_sided: false })
+    Ok(Material {
+        name: mtl.name.clone(),
+        kind: MaterialKind::Lambert { albedo },
+        emission: ke,
+        two_sided_emission: false,
+        one_sided: false,
+    })
 }
 
 #[cfg(test)]

@@ -38,11 +38,7 @@ impl TriMesh {
             let nm = linear.inverse().transpose();
             self.normals.iter().map(|&n| nm.mul_vec3(n).normalize_or_zero()).collect()
         };
-        let triangles = if det < 0.0 {
-            self.triangles.iter().map(|&[a, b, c]| [a, c, b]).collect()
-        } else {
-            self.triangles.clone()
-        };
+        let triangles = if det < 0.0 { self.triangles.iter().map(|&[a, b, c]| [a, c, b]).collect() } else { self.triangles.clone() };
         TriMesh { positions, normals, uvs: self.uvs.clone(), triangles }
     }
 
@@ -107,7 +103,13 @@ pub fn sphere(radius: f32, segments: u32) -> TriMesh {
             let phi = u * TAU;
             let n = Vec3::new(theta.sin() * phi.cos(), theta.cos(), -theta.sin() * phi.sin());
             // Exact poles: keep the top and bottom rows collapsed onto one point.
-            let n = if i == 0 { Vec3::Y } else if i == stacks { -Vec3::Y } else { n };
+            let n = if i == 0 {
+                Vec3::Y
+            } else if i == stacks {
+                -Vec3::Y
+            } else {
+                n
+            };
             m.positions.push(n * radius);
             m.normals.push(n);
             m.uvs.push(Vec2::new(u, v));

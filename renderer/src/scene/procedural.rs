@@ -237,7 +237,10 @@ pub fn grid(element: GridElement, count: [u32; 3], spacing: Vec3, element_scale:
     .transformed(&Mat4::from_scale(element_scale));
     let triangles = copies * base.triangles.len() as u64;
     if triangles > MAX_SHAPE_TRIANGLES {
-        return Err(format!("count {count:?} of {} triangles each makes {triangles} triangles (at most {MAX_SHAPE_TRIANGLES})", base.triangles.len()));
+        return Err(format!(
+            "count {count:?} of {} triangles each makes {triangles} triangles (at most {MAX_SHAPE_TRIANGLES})",
+            base.triangles.len()
+        ));
     }
     let mut out = TriMesh::default();
     let c = Vec3::new(count[0] as f32 - 1.0, count[1] as f32 - 1.0, count[2] as f32 - 1.0) * 0.5;
@@ -329,10 +332,12 @@ mod tests {
     fn lathe_smooth_profile_averages_normals() {
         // A sphere-like profile: consecutive segments turn by 18°, under the crease angle, so the
         // shared rings must carry the same (averaged) normal on both sides.
-        let pts: Vec<[f32; 2]> = (0..=10).map(|i| {
-            let t = std::f32::consts::PI * (i as f32 / 10.0 - 0.5);
-            [t.cos().max(0.0), t.sin()]
-        }).collect();
+        let pts: Vec<[f32; 2]> = (0..=10)
+            .map(|i| {
+                let t = std::f32::consts::PI * (i as f32 / 10.0 - 0.5);
+                [t.cos().max(0.0), t.sin()]
+            })
+            .collect();
         let mut pts = pts;
         pts[0][0] = 0.0;
         pts[10][0] = 0.0;

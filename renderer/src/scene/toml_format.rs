@@ -646,7 +646,10 @@ fn environment(check: &Check, dir: &Path, e: &EnvironmentDef) -> Result<Environm
             if e.rotation.is_some() {
                 return Err(check.err("environment.rotation", "only a map can be rotated"));
             }
-            let color = check.nonneg3("environment.color", e.color.ok_or_else(|| check.err("environment.color", "missing (a constant environment needs a colour)"))?)?;
+            let color = check.nonneg3(
+                "environment.color",
+                e.color.ok_or_else(|| check.err("environment.color", "missing (a constant environment needs a colour)"))?,
+            )?;
             let c = color * scale;
             if !c.is_finite() {
                 return Err(check.err("environment.scale", "color × scale overflows"));

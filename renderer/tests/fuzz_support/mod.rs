@@ -49,7 +49,10 @@ fn refuse(size: usize) {
             if !c.is_empty() {
                 let _ = writeln!(std::io::stderr(), "fuzz: refused an allocation of {size} bytes (cap {MAX_ALLOCATION}) while reading {c}");
             } else if let Ok(last) = LAST_CASE.try_lock() {
-                let _ = writeln!(std::io::stderr(), "fuzz: refused an allocation of {size} bytes (cap {MAX_ALLOCATION}) on a helper thread; the last case started: {last}");
+                let _ = writeln!(
+                    std::io::stderr(),
+                    "fuzz: refused an allocation of {size} bytes (cap {MAX_ALLOCATION}) on a helper thread; the last case started: {last}"
+                );
             }
         }
     });
@@ -108,7 +111,11 @@ impl Tally {
 /// Runs `read` on a worker thread labelled `case`: a panic or a run past [`CASE_TIMEOUT`] fails
 /// the proptest case with the message; `Ok` and `Err` both pass (and are counted in `tally`).
 /// With `PIXGUIDE_FUZZ_VERBOSE` set, every case and the reader's answer are printed.
-pub fn guarded<T, E: std::fmt::Debug>(tally: &Tally, case: String, read: impl FnOnce() -> Result<T, E> + Send + 'static) -> Result<(), TestCaseError> {
+pub fn guarded<T, E: std::fmt::Debug>(
+    tally: &Tally,
+    case: String,
+    read: impl FnOnce() -> Result<T, E> + Send + 'static,
+) -> Result<(), TestCaseError> {
     let (tx, rx) = std::sync::mpsc::channel();
     let label = case.clone();
     std::thread::Builder::new()
@@ -176,7 +183,14 @@ pub enum Inputs {
 /// One proptest run over `strategy` with [`config`]`(cases, salt)`: `case` gets each value and
 /// the run's tally (for [`guarded`]). A failing case panics with `name` and proptest's shrunk
 /// input; afterwards the tally is checked or reported, as `inputs` says.
-pub fn run_cases<S: Strategy>(name: &str, cases: u32, salt: u64, inputs: Inputs, strategy: &S, case: impl Fn(&Tally, S::Value) -> Result<(), TestCaseError>) {
+pub fn run_cases<S: Strategy>(
+    name: &str,
+    cases: u32,
+    salt: u64,
+    inputs: Inputs,
+    strategy: &S,
+    case: impl Fn(&Tally, S::Value) -> Result<(), TestCaseError>,
+) {
     let tally = Tally::default();
     let mut runner = TestRunner::new(config(cases, salt));
     if let Err(e) = runner.run(strategy, |value| case(&tally, value)) {
@@ -191,31 +205,83 @@ pub fn run_cases<S: Strategy>(name: &str, cases: u32, salt: u64, inputs: Inputs,
 /// Numbers that break readers which trust them: zero, negatives, the edges of the integer
 /// types, beyond f32, and the non-finite spellings of TOML, JSON and XML writers.
 pub const HOSTILE_NUMBERS: &[&str] = &[
-    "0", "-1", "-0", "1e9", "1000000000", "4294967295", "4294967296", "2147483648", "-2147483649", "18446744073709551615",
-    "99999999999999999999", "1e39", "-1e39", "1e-45", "3.5e38", "nan", "NaN", "inf", "-inf", "Infinity", "0.0", "0.5", "65536", "16385",
+    "0",
+    "-1",
+    "-0",
+    "1e9",
+    "1000000000",
+    "4294967295",
+    "4294967296",
+    "2147483648",
+    "-2147483649",
+    "18446744073709551615",
+    "99999999999999999999",
+    "1e39",
+    "-1e39",
+    "1e-45",
+    "3.5e38",
+    "nan",
+    "NaN",
+    "inf",
+    "-inf",
+    "Infinity",
+    "0.0",
+    "0.5",
+    "65536",
+    "16385",
 ];
 
 /// 32-bit words written over binary headers: sizes and offsets at and around the edges.
-pub const HOSTILE_WORDS: &[u32] = &[0, 1, 2, 0x7fff_ffff, 0x8000_0000, 0xffff_ffff, 0xffff_fffe, 0x0001_0000, 0x4000_0000, 0x00ff_ffff, 65537, 100_000];
+pub const HOSTILE_WORDS: &[u32] =
+    &[0, 1, 2, 0x7fff_ffff, 0x8000_0000, 0xffff_ffff, 0xffff_fffe, 0x0001_0000, 0x4000_0000, 0x00ff_ffff, 65537, 100_000];
 
 /// One edit of a file. Positions are `Index`es, resolved against the length at the time the
 /// edit applies; `head` edits land in the first KiB, where binary formats keep their headers.
 #[derive(Clone, Debug)]
 pub enum Mutation {
-    FlipBit { at: Index, head: bool, bit: u8 },
-    SetByte { at: Index, head: bool, value: u8 },
-    Truncate { at: Index },
-    Delete { at: Index, len: u16 },
+    FlipBit {
+        at: Index,
+        head: bool,
+        bit: u8,
+    },
+    SetByte {
+        at: Index,
+        head: bool,
+        value: u8,
+    },
+    Truncate {
+        at: Index,
+    },
+    Delete {
+        at: Index,
+        len: u16,
+    },
     /// Repeats a span (nesting, duplicated keys, repeated records).
-    Duplicate { at: Index, len: u16 },
+    Duplicate {
+        at: Index,
+        len: u16,
+    },
     /// Replaces the n-th run of ASCII digits (with sign, point, exponent) by a hostile number.
-    Number { nth: Index, with: &'static str },
+    Number {
+        nth: Index,
+        with: &'static str,
+    },
     /// Inserts a hostile number at a position.
-    InsertNumber { at: Index, with: &'static str },
+    InsertNumber {
+        at: Index,
+        with: &'static str,
+    },
     /// Writes a little-endian 32- or 64-bit word.
-    Word { at: Index, head: bool, value: u32, wide: bool },
+    Word {
+        at: Index,
+        head: bool,
+        value: u32,
+        wide: bool,
+    },
     /// Removes a whole line (a field, an element, a face).
-    DeleteLine { nth: Index },
+    DeleteLine {
+        nth: Index,
+    },
 }
 
 impl Mutation {
@@ -258,14 +324,18 @@ impl Mutation {
                 b.splice(i..i, with.bytes());
             }
             Mutation::Word { at, head, value, wide } => {
-                let bytes: Vec<u8> = if *wide { (*value as u64 | ((*value as u64) << 32)).to_le_bytes().to_vec() } else { value.to_le_bytes().to_vec() };
+                let bytes: Vec<u8> =
+                    if *wide { (*value as u64 | ((*value as u64) << 32)).to_le_bytes().to_vec() } else { value.to_le_bytes().to_vec() };
                 if b.len() >= bytes.len() {
                     let i = pos(at, *head, b.len() - bytes.len() + 1);
                     b[i..i + bytes.len()].copy_from_slice(&bytes);
                 }
             }
             Mutation::DeleteLine { nth } => {
-                let starts: Vec<usize> = std::iter::once(0).chain(b.iter().enumerate().filter(|(_, &c)| c == b'\n').map(|(i, _)| i + 1)).filter(|&i| i < b.len()).collect();
+                let starts: Vec<usize> = std::iter::once(0)
+                    .chain(b.iter().enumerate().filter(|(_, &c)| c == b'\n').map(|(i, _)| i + 1))
+                    .filter(|&i| i < b.len())
+                    .collect();
                 if !starts.is_empty() {
                     let s = starts[nth.index(starts.len())];
                     let e = b[s..].iter().position(|&c| c == b'\n').map_or(b.len(), |p| s + p + 1);
@@ -284,7 +354,13 @@ fn number_runs(b: &[u8]) -> Vec<(usize, usize)> {
         if b[i].is_ascii_digit() && (i == 0 || !b[i - 1].is_ascii_alphanumeric()) {
             let s = if i > 0 && b[i - 1] == b'-' { i - 1 } else { i };
             let mut e = i;
-            while e < b.len() && (b[e].is_ascii_digit() || b[e] == b'.' || b[e] == b'e' || b[e] == b'E' || (b[e] == b'-' && e > 0 && matches!(b[e - 1], b'e' | b'E'))) {
+            while e < b.len()
+                && (b[e].is_ascii_digit()
+                    || b[e] == b'.'
+                    || b[e] == b'e'
+                    || b[e] == b'E'
+                    || (b[e] == b'-' && e > 0 && matches!(b[e - 1], b'e' | b'E')))
+            {
                 e += 1;
             }
             out.push((s, e));
@@ -327,7 +403,8 @@ pub fn apply_all(original: &[u8], edits: &[Mutation]) -> Vec<u8> {
 
 /// Text assembled from a format's own tokens, so arbitrary inputs get past the lexer.
 pub fn token_soup(tokens: &'static [&'static str], max: usize) -> impl Strategy<Value = Vec<u8>> {
-    prop::collection::vec(prop_oneof![4 => prop::sample::select(tokens), 1 => prop::sample::select(HOSTILE_NUMBERS)], 0..max).prop_map(|t| t.concat().into_bytes())
+    prop::collection::vec(prop_oneof![4 => prop::sample::select(tokens), 1 => prop::sample::select(HOSTILE_NUMBERS)], 0..max)
+        .prop_map(|t| t.concat().into_bytes())
 }
 
 pub fn repo() -> PathBuf {

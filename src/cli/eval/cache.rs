@@ -92,7 +92,11 @@ impl Cache {
     pub(super) fn open(path: &Path) -> Result<Cache> {
         crate::cli::denoise::ensure_parent(path)?;
         let map = read_cache(path)?;
-        let file = std::fs::OpenOptions::new().create(true).append(true).open(path).with_context(|| format!("opening the cache {}", path.display()))?;
+        let file = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(path)
+            .with_context(|| format!("opening the cache {}", path.display()))?;
         Ok(Cache { map, file })
     }
     pub(super) fn get(&self, k: &str) -> Option<&Record> {

@@ -71,11 +71,27 @@ pub(super) fn methods(a: &EvalArgs) -> Result<Vec<MethodSpec>> {
         if name == "oidn" {
             let label = OIDN_LABEL.to_string();
             match crate::cli::oidn_setup::load() {
-                Ok((o, _)) => out.push(MethodSpec { name, label, file: None, id: crate::cli::oidn_setup::method_id(&o), loaded: None, oidn: Some(o), missing: None }),
+                Ok((o, _)) => out.push(MethodSpec {
+                    name,
+                    label,
+                    file: None,
+                    id: crate::cli::oidn_setup::method_id(&o),
+                    loaded: None,
+                    oidn: Some(o),
+                    missing: None,
+                }),
                 Err(e) => {
                     // One line, and the run goes on without it: the baseline is optional.
                     eprintln!("eval: leaving out OIDN: {e:#}");
-                    out.push(MethodSpec { name, label, file: None, id: String::new(), loaded: None, oidn: None, missing: Some(format!("{e:#}")) });
+                    out.push(MethodSpec {
+                        name,
+                        label,
+                        file: None,
+                        id: String::new(),
+                        loaded: None,
+                        oidn: None,
+                        missing: Some(format!("{e:#}")),
+                    });
                 }
             }
             continue;
@@ -87,7 +103,15 @@ pub(super) fn methods(a: &EvalArgs) -> Result<Vec<MethodSpec>> {
         let file = a.weights_dir.join(format!("{stem}.safetensors"));
         if !file.exists() {
             let missing = Some(format!("no {}", file.display()));
-            out.push(MethodSpec { name: name.clone(), label: label.into(), file: Some(file), id: String::new(), loaded: None, oidn: None, missing });
+            out.push(MethodSpec {
+                name: name.clone(),
+                label: label.into(),
+                file: Some(file),
+                id: String::new(),
+                loaded: None,
+                oidn: None,
+                missing,
+            });
             continue;
         }
         let loaded = weights::load(&file, &device).with_context(|| format!("loading the {name} weights"))?;

@@ -156,7 +156,10 @@ pub fn run(a: EvalArgs) -> Result<()> {
         }
     }
     let breakdown_scene = a.breakdown_scene.clone().unwrap_or_else(|| scenes[0].name.clone());
-    let breakdown_idx = scenes.iter().position(|s| s.name == breakdown_scene).with_context(|| format!("--breakdown-scene {breakdown_scene}: not a scene of {}", a.scenes.display()))?;
+    let breakdown_idx = scenes
+        .iter()
+        .position(|s| s.name == breakdown_scene)
+        .with_context(|| format!("--breakdown-scene {breakdown_scene}: not a scene of {}", a.scenes.display()))?;
     let dir = png_dir(&a.out);
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let cache_path = a.cache.clone().unwrap_or_else(|| dir.join("cache.jsonl"));
@@ -176,7 +179,8 @@ pub fn run(a: EvalArgs) -> Result<()> {
     let mut cached = 0usize;
     for (si, s) in scenes.iter().enumerate() {
         let is_pic = pictures.contains(&s.name);
-        let mut spps: Vec<u32> = a.spp.iter().copied().chain([NORM_SPP]).chain(if is_pic { a.picture_spp.clone() } else { vec![] }).collect();
+        let mut spps: Vec<u32> =
+            a.spp.iter().copied().chain([NORM_SPP]).chain(if is_pic { a.picture_spp.clone() } else { vec![] }).collect();
         spps.sort_unstable();
         spps.dedup();
         for spp in spps {
@@ -190,7 +194,11 @@ pub fn run(a: EvalArgs) -> Result<()> {
                     n == "noisy" || in_table || (picture && PICTURE_METHODS.contains(&n))
                 })
                 .collect();
-            let uncached = |i: usize| cache.get(&key("quality", &s.name, &s.reference_id, spp, &methods[i].name, &methods[i].id, a.seed, s.width, s.height)).is_none();
+            let uncached = |i: usize| {
+                cache
+                    .get(&key("quality", &s.name, &s.reference_id, spp, &methods[i].name, &methods[i].id, a.seed, s.width, s.height))
+                    .is_none()
+            };
             // Pictures are redrawn when a file is missing, or when a picture method is measured
             // anew (new weights, or a method new to the page such as OIDN), whose panel would
             // otherwise be stale or absent.
@@ -219,7 +227,17 @@ pub fn run(a: EvalArgs) -> Result<()> {
     if a.breakdown_size > 0 {
         for g in (0..methods.len()).filter(|&i| BREAKDOWN_METHODS.contains(&methods[i].name.as_str()) && methods[i].available()) {
             for &spp in &a.spp {
-                let k = key("breakdown", &breakdown_scene, "", spp, &methods[g].name, &methods[g].id, a.seed, a.breakdown_size, a.breakdown_size);
+                let k = key(
+                    "breakdown",
+                    &breakdown_scene,
+                    "",
+                    spp,
+                    &methods[g].name,
+                    &methods[g].id,
+                    a.seed,
+                    a.breakdown_size,
+                    a.breakdown_size,
+                );
                 if cache.get(&k).is_none() {
                     breakdown_todo.push((g, spp));
                 } else {
@@ -283,7 +301,8 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 }
             }
             let tp = Instant::now();
-            let prepared = preprocess::prepare_for_inference(&mut frame).with_context(|| format!("preprocessing {} at {} spp", s.name, job.spp))?;
+            let prepared =
+                preprocess::prepare_for_inference(&mut frame).with_context(|| format!("preprocessing {} at {} spp", s.name, job.spp))?;
             let prepare_s = tp.elapsed().as_secs_f64();
             inputs.push((desc, frame, render_s, prepared, prepare_s));
         }
@@ -392,7 +411,10 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 r.time_s = render_s + r.prepare_s + r.denoise_s;
                 let t = &d.timings;
                 (r.gather_s, r.d_g_s, r.d_p_s, r.e_s, r.readback_s) = (t.gather_s, t.d_g_s, t.d_p_s, t.e_s, t.readback_s);
-                say(format!("breakdown {} {size}² {spp:>2} spp: render {:.2} s, preprocess {:.2} s, D_G {:.2} s, D_P {:.2} s, E {:.2} s", s.name, render_s, r.prepare_s, r.d_g_s, r.d_p_s, r.e_s));
+                say(format!(
+                    "breakdown {} {size}² {spp:>2} spp: render {:.2} s, preprocess {:.2} s, D_G {:.2} s, D_P {:.2} s, E {:.2} s",
+                    s.name, render_s, r.prepare_s, r.d_g_s, r.d_p_s, r.e_s
+                ));
             }
             r.date = super::train::iso_date_utc();
             r.load1 = load1();

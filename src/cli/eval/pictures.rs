@@ -68,7 +68,9 @@ fn hardest_window(score: &[f64], w: usize, h: usize) -> Window {
             sat[(y + 1) * (w + 1) + x + 1] = v + sat[y * (w + 1) + x + 1] + sat[(y + 1) * (w + 1) + x] - sat[y * (w + 1) + x];
         }
     }
-    let sum = |x: usize, y: usize| sat[(y + ch) * (w + 1) + x + cw] - sat[y * (w + 1) + x + cw] - sat[(y + ch) * (w + 1) + x] + sat[y * (w + 1) + x];
+    let sum = |x: usize, y: usize| {
+        sat[(y + ch) * (w + 1) + x + cw] - sat[y * (w + 1) + x + cw] - sat[(y + ch) * (w + 1) + x] + sat[y * (w + 1) + x]
+    };
     let mut best = (f64::NEG_INFINITY, Window { x: 0, y: 0, w: cw, h: ch });
     for y in 0..=h - ch {
         for x in 0..=w - cw {
@@ -156,7 +158,10 @@ fn colour_bar(h: u32, colour: impl Fn(f64) -> [u8; 3]) -> (Vec<u8>, (u32, u32)) 
 
 /// Per-pixel relMSE (mean over channels) of tone-mapped colours against the reference's.
 fn error_map(t: &[[f64; 3]], reference: &[[f64; 3]]) -> Vec<f64> {
-    t.iter().zip(reference).map(|(x, y)| (0..3).map(|c| (x[c] - y[c]).powi(2) / (y[c] * y[c] + metrics::REL_MSE_EPS)).sum::<f64>() / 3.0).collect()
+    t.iter()
+        .zip(reference)
+        .map(|(x, y)| (0..3).map(|c| (x[c] - y[c]).powi(2) / (y[c] * y[c] + metrics::REL_MSE_EPS)).sum::<f64>() / 3.0)
+        .collect()
 }
 
 /// Images, error maps and W_G maps of one (scene, spp): whole frames on the first row, on the
@@ -177,7 +182,8 @@ pub fn write_pictures(dir: &Path, p: &PictureData) -> Result<()> {
     // error of the displayed (tone-mapped) colours, which unlike relMSE does not single out the
     // darkest corner.
     let shown: Vec<&Vec<[f64; 3]>> = ordered.iter().zip(&toned).filter(|(i, _)| i.0 != "noisy").map(|(_, t)| t).collect();
-    let score: Vec<f64> = (0..w * h).map(|i| shown.iter().map(|t| (0..3).map(|c| (t[i][c] - reference[i][c]).powi(2)).sum::<f64>()).sum()).collect();
+    let score: Vec<f64> =
+        (0..w * h).map(|i| shown.iter().map(|t| (0..3).map(|c| (t[i][c] - reference[i][c]).powi(2)).sum::<f64>()).sum()).collect();
     let win = hardest_window(&score, w, h);
     let zoom_label = format!("{ZOOM}× zoom");
     let to8 = |t: &[[f64; 3]]| -> Vec<[u8; 3]> { t.iter().map(|c| c.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8)).collect() };
@@ -199,7 +205,14 @@ pub fn write_pictures(dir: &Path, p: &PictureData) -> Result<()> {
 
     let mut sheet = Sheet::new(ordered.len() + 1, 2, tile);
     for (k, (_, label, _, rel)) in ordered.iter().enumerate() {
-        both_rows(&mut sheet, k, mapped(&errors[k], &inferno_log), label, &format!("relMSE {rel:.4}"), &format!("{:.4}", window_mean(&errors[k], w, win)));
+        both_rows(
+            &mut sheet,
+            k,
+            mapped(&errors[k], &inferno_log),
+            label,
+            &format!("relMSE {rel:.4}"),
+            &format!("{:.4}", window_mean(&errors[k], w, win)),
+        );
     }
     let (bar, bs) = colour_bar(tile.1, |t| inferno_log(10f64.powf(4.0 * t - 4.0)));
     sheet.put(0, ordered.len(), &bar, bs, "scale", "10⁻⁴ to 1");
@@ -243,7 +256,9 @@ mod tests {
         assert_eq!((win.w, win.h), (10, 7));
         assert!(win.x <= 20 && win.x + win.w >= 24 && win.y <= 12 && win.y + win.h >= 16, "{win:?}");
         // Brute force agrees on the best sum.
-        let sum = |x: usize, y: usize| (y..y + 7).map(|yy| score[yy * w + x..yy * w + x + 10].iter().filter(|v| v.is_finite()).sum::<f64>()).sum::<f64>();
+        let sum = |x: usize, y: usize| {
+            (y..y + 7).map(|yy| score[yy * w + x..yy * w + x + 10].iter().filter(|v| v.is_finite()).sum::<f64>()).sum::<f64>()
+        };
         let best = (0..=h - 7).flat_map(|y| (0..=w - 10).map(move |x| (x, y))).map(|(x, y)| sum(x, y)).fold(f64::MIN, f64::max);
         assert!((sum(win.x, win.y) - best).abs() < 1e-9);
         assert!((window_mean(&score, w, win) - best / 70.0).abs() < 1e-12);

@@ -100,7 +100,14 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
     writeln!(w, "# Results: error against samples and against time\n")?;
     writeln!(w, "*Written by `pixguide eval` from its own measurements; regenerate it with the command below rather than editing it.*\n")?;
     writeln!(w, "- **command**: `{}`", command_line())?;
-    writeln!(w, "- **date**: {} · **commit**: {}", crate::cli::train::iso_date_utc(), { let c = crate::cli::train::git_commit(); if c.is_empty() { "unknown".into() } else { c } })?;
+    writeln!(w, "- **date**: {} · **commit**: {}", crate::cli::train::iso_date_utc(), {
+        let c = crate::cli::train::git_commit();
+        if c.is_empty() {
+            "unknown".into()
+        } else {
+            c
+        }
+    })?;
     let loads = mean(&o.load_samples);
     writeln!(
         w,
@@ -223,8 +230,20 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
     };
     let spp_png = dir.join("error-vs-spp.png");
     let time_png = dir.join("error-vs-time.png");
-    eval_plot::write_pair(&spp_png, "samples per pixel", Some(spps.iter().map(|&s| s as f64).collect()), ("relMSE / 2-spp noisy", &curves(Metric::RelMse, false)), ("1 − SSIM / 2-spp noisy", &curves(Metric::Ssim, false)))?;
-    eval_plot::write_pair(&time_png, "seconds (render + denoise)", None, ("relMSE / 2-spp noisy", &curves(Metric::RelMse, true)), ("1 − SSIM / 2-spp noisy", &curves(Metric::Ssim, true)))?;
+    eval_plot::write_pair(
+        &spp_png,
+        "samples per pixel",
+        Some(spps.iter().map(|&s| s as f64).collect()),
+        ("relMSE / 2-spp noisy", &curves(Metric::RelMse, false)),
+        ("1 − SSIM / 2-spp noisy", &curves(Metric::Ssim, false)),
+    )?;
+    eval_plot::write_pair(
+        &time_png,
+        "seconds (render + denoise)",
+        None,
+        ("relMSE / 2-spp noisy", &curves(Metric::RelMse, true)),
+        ("1 − SSIM / 2-spp noisy", &curves(Metric::Ssim, true)),
+    )?;
     writeln!(w, "\n## Error against samples per pixel and against time\n")?;
     writeln!(w, "Mean normalised error, log-log; one curve per method, plain Monte Carlo included (the paper's Fig. 4 and Fig. 10).\n")?;
     writeln!(w, "![error vs spp]({rel}/error-vs-spp.png)\n\n![error vs time]({rel}/error-vs-time.png)\n")?;
@@ -266,7 +285,14 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
         for &spp in &spps {
             for m in &shown {
                 let found = o.records.values().find(|r| {
-                    r.kind == "breakdown" && r.method == m.name && r.scene == o.breakdown_scene && r.spp == spp && r.weights == m.id && r.seed == a.seed && r.width == size && r.height == size
+                    r.kind == "breakdown"
+                        && r.method == m.name
+                        && r.scene == o.breakdown_scene
+                        && r.spp == spp
+                        && r.weights == m.id
+                        && r.seed == a.seed
+                        && r.width == size
+                        && r.height == size
                 });
                 let Some(r) = found else { continue };
                 if m.oidn.is_some() {
@@ -291,7 +317,10 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
 
     // Per scene.
     writeln!(w, "\n## Per scene\n")?;
-    writeln!(w, "Each cell: raw error (normalised by the scene's {NORM_SPP}-spp noisy error). The mean row averages each over the scenes.\n")?;
+    writeln!(
+        w,
+        "Each cell: raw error (normalised by the scene's {NORM_SPP}-spp noisy error). The mean row averages each over the scenes.\n"
+    )?;
     for metric in [Metric::RelMse, Metric::Ssim] {
         writeln!(w, "### {}\n", metric.name())?;
         for &spp in &spps {

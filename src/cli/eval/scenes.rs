@@ -40,10 +40,15 @@ pub(super) fn scenes(list: &Path) -> Result<Vec<TestScene>> {
         if !reference.exists() {
             bail!("no reference for the test scene {name}: {} does not exist (render it with `pixguide reference`)", reference.display());
         }
-        let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).with_context(|| format!("reading {}", json.display()))?)
-            .with_context(|| format!("parsing {}", json.display()))?;
+        let meta: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).with_context(|| format!("reading {}", json.display()))?)
+                .with_context(|| format!("parsing {}", json.display()))?;
         let dim = |f: &str| -> Result<u32> {
-            meta.get(f).and_then(|v| v.as_u64()).filter(|&v| v > 0 && v < 1 << 16).map(|v| v as u32).with_context(|| format!("{}: field `{f}` is missing or not a positive integer", json.display()))
+            meta.get(f)
+                .and_then(|v| v.as_u64())
+                .filter(|&v| v > 0 && v < 1 << 16)
+                .map(|v| v as u32)
+                .with_context(|| format!("{}: field `{f}` is missing or not a positive integer", json.display()))
         };
         let reference_id = file_id(&reference)?;
         out.push(TestScene { name, path, reference, reference_id, width: dim("width")?, height: dim("height")? });

@@ -58,7 +58,18 @@ pub fn libllvm_for_drjit() -> Option<PathBuf> {
     if let Some(p) = std::env::var_os("DRJIT_LIBLLVM_PATH").filter(|p| !p.is_empty()) {
         return Some(PathBuf::from(p));
     }
-    let mut dirs: Vec<PathBuf> = ["/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib64", "/usr/lib", "/usr/local/lib", "/opt/homebrew/opt/llvm/lib", "/usr/local/opt/llvm/lib"].iter().map(PathBuf::from).collect();
+    let mut dirs: Vec<PathBuf> = [
+        "/usr/lib/x86_64-linux-gnu",
+        "/usr/lib/aarch64-linux-gnu",
+        "/usr/lib64",
+        "/usr/lib",
+        "/usr/local/lib",
+        "/opt/homebrew/opt/llvm/lib",
+        "/usr/local/opt/llvm/lib",
+    ]
+    .iter()
+    .map(PathBuf::from)
+    .collect();
     // Debian/Ubuntu's per-version trees (/usr/lib/llvm-19/lib), Fedora's (/usr/lib64/llvm19/lib).
     for parent in ["/usr/lib", "/usr/lib64"] {
         if let Ok(rd) = std::fs::read_dir(parent) {
@@ -99,12 +110,19 @@ fn libllvm_major(name: &str) -> Option<u32> {
 /// patched. A lock file beside the venv (`<venv>.lock`) is held meanwhile, so that two processes
 /// (a test and an eval, say) never build the same venv at once.
 pub fn tools_venv(venv: &Path, packages: &[&str], probe: &str) -> Result<ToolsVenv> {
-    let fail = |what: String, detail: &str| Error(format!("Python venv {}: {what}{}{}", venv.display(), if detail.is_empty() { "" } else { ": " }, detail));
+    let fail = |what: String, detail: &str| {
+        Error(format!("Python venv {}: {what}{}{}", venv.display(), if detail.is_empty() { "" } else { ": " }, detail))
+    };
     if let Some(dir) = venv.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| fail(format!("creating {}", dir.display()), &e.to_string()))?;
     }
     let lock_path = venv.with_extension("lock");
-    let lock = std::fs::OpenOptions::new().create(true).truncate(false).write(true).open(&lock_path).map_err(|e| fail(format!("opening {}", lock_path.display()), &e.to_string()))?;
+    let lock = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&lock_path)
+        .map_err(|e| fail(format!("opening {}", lock_path.display()), &e.to_string()))?;
     lock.lock().map_err(|e| fail(format!("locking {}", lock_path.display()), &e.to_string()))?;
     let python = venv.join("bin/python");
     let run_probe = || Command::new(&python).args(["-c", probe]).output();
@@ -113,7 +131,11 @@ pub fn tools_venv(venv: &Path, packages: &[&str], probe: &str) -> Result<ToolsVe
             return Ok(ToolsVenv { python, probe: String::from_utf8_lossy(&out.stdout).trim().to_string() });
         }
     }
-    let out = Command::new("python3").args(["-m", "venv", "--clear"]).arg(venv).output().map_err(|e| fail("python3 -m venv".into(), &e.to_string()))?;
+    let out = Command::new("python3")
+        .args(["-m", "venv", "--clear"])
+        .arg(venv)
+        .output()
+        .map_err(|e| fail("python3 -m venv".into(), &e.to_string()))?;
     if !out.status.success() {
         return Err(fail("python3 -m venv failed".into(), &last_line(&out.stderr)));
     }

@@ -25,7 +25,18 @@ fn phi_of(w: Vec3) -> f64 {
 }
 
 #[allow(clippy::too_many_arguments)]
-fn simpson_rec(f: &mut dyn FnMut(f64) -> f64, a: f64, b: f64, fa: f64, fm: f64, fb: f64, whole: f64, eps: f64, rel: f64, depth: u32) -> f64 {
+fn simpson_rec(
+    f: &mut dyn FnMut(f64) -> f64,
+    a: f64,
+    b: f64,
+    fa: f64,
+    fm: f64,
+    fb: f64,
+    whole: f64,
+    eps: f64,
+    rel: f64,
+    depth: u32,
+) -> f64 {
     let m = 0.5 * (a + b);
     let (lm, rm) = (0.5 * (a + m), 0.5 * (m + b));
     let (flm, frm) = (f(lm), f(rm));

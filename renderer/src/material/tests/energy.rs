@@ -30,7 +30,10 @@ fn white_bsdfs() -> Vec<(String, Bsdf)> {
     let mut v: Vec<(String, Bsdf)> = vec![("lambert".into(), Bsdf::Lambert { albedo: Vec3::ONE })];
     for alpha in [0.0, 0.002, 0.05, 0.3, 1.0] {
         // Silver-like and a k = 0 "conductor" (a dielectric-like Fresnel) bracket the range.
-        v.push((format!("conductor a={alpha}"), Bsdf::Conductor { eta: Vec3::splat(0.15), k: Vec3::splat(3.6), alpha, specular_tint: Vec3::ONE, dist: Default::default() }));
+        v.push((
+            format!("conductor a={alpha}"),
+            Bsdf::Conductor { eta: Vec3::splat(0.15), k: Vec3::splat(3.6), alpha, specular_tint: Vec3::ONE, dist: Default::default() },
+        ));
         v.push((format!("gold a={alpha}"), conductor(alpha)));
         for eta in [1.01, 1.33, 1.5, 2.4] {
             v.push((format!("dielectric a={alpha} eta={eta}"), Bsdf::Dielectric { eta, alpha, tint: Vec3::ONE, dist: Default::default() }));
@@ -38,7 +41,10 @@ fn white_bsdfs() -> Vec<(String, Bsdf)> {
     }
     for alpha in [0.0, 0.05, 0.1, 0.3, 0.6, 1.0] {
         for eta in [1.0, 1.2, 1.5, 2.0, 3.0] {
-            v.push((format!("plastic a={alpha} eta={eta}"), Bsdf::Plastic { albedo: Vec3::ONE, eta, alpha, dist: Default::default(), nonlinear: true }));
+            v.push((
+                format!("plastic a={alpha} eta={eta}"),
+                Bsdf::Plastic { albedo: Vec3::ONE, eta, alpha, dist: Default::default(), nonlinear: true },
+            ));
         }
     }
     v

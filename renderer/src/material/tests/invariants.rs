@@ -132,8 +132,16 @@ fn lobe_bitmasks_match_method() {
         (Bsdf::Dielectric { eta: 1.5, alpha: 0.0, tint: Vec3::ONE, dist: Default::default() }, wo_at(0.5), vec![17, 18]),
         (Bsdf::Dielectric { eta: 1.5, alpha: 0.2, tint: Vec3::ONE, dist: Default::default() }, wo_at(-0.5), vec![9, 10]),
         (Bsdf::Dielectric { eta: 1.0, alpha: 0.2, tint: Vec3::ONE, dist: Default::default() }, wo_at(0.5), vec![18]),
-        (Bsdf::Plastic { albedo: Vec3::splat(0.5), eta: 1.5, alpha: 0.0, dist: Default::default(), nonlinear: true }, wo_at(0.2), vec![5, 17]),
-        (Bsdf::Plastic { albedo: Vec3::splat(0.5), eta: 1.5, alpha: 0.2, dist: Default::default(), nonlinear: true }, wo_at(0.2), vec![5, 9]),
+        (
+            Bsdf::Plastic { albedo: Vec3::splat(0.5), eta: 1.5, alpha: 0.0, dist: Default::default(), nonlinear: true },
+            wo_at(0.2),
+            vec![5, 17],
+        ),
+        (
+            Bsdf::Plastic { albedo: Vec3::splat(0.5), eta: 1.5, alpha: 0.2, dist: Default::default(), nonlinear: true },
+            wo_at(0.2),
+            vec![5, 9],
+        ),
     ];
     let mut rng = Pcg32::new(1, 2);
     for (bsdf, wo, expect) in cases {

@@ -62,7 +62,8 @@ impl<'a, 'i> Loader<'a, 'i> {
                 [one] if one.tag_name().name() == "bsdf" => self.bsdf(*one, name).map(|d| BsdfDef { two_sided: true, ..d }),
                 [one] if one.tag_name().name() == "ref" => {
                     let id = self.required(*one, "id")?;
-                    let d = self.bsdfs.get(&id).cloned().ok_or_else(|| self.err(*one, format!("no <bsdf id=\"{id}\"> defined before this")))?;
+                    let d =
+                        self.bsdfs.get(&id).cloned().ok_or_else(|| self.err(*one, format!("no <bsdf id=\"{id}\"> defined before this")))?;
                     Ok(BsdfDef { two_sided: true, ..d })
                 }
                 _ => Err(self.err(n, "twosided needs exactly one nested <bsdf> (two different sides are not supported)")),
@@ -97,11 +98,12 @@ impl<'a, 'i> Loader<'a, 'i> {
                         _ => return Err(self.err(c, format!("microfacet distribution \"{d}\" is not supported (ggx, beckmann)"))),
                     };
                 }
-                ("diffuse" | "roughdiffuse", "reflectance") | ("plastic" | "roughplastic", "diffuseReflectance" | "diffuse_reflectance") => {
-                    reflectance = Some(self.spectrum(c)?)
-                }
+                ("diffuse" | "roughdiffuse", "reflectance")
+                | ("plastic" | "roughplastic", "diffuseReflectance" | "diffuse_reflectance") => reflectance = Some(self.spectrum(c)?),
                 (_, "specularReflectance" | "specular_reflectance") => specular = Some(self.spectrum(c)?),
-                ("dielectric" | "roughdielectric", "specularTransmittance" | "specular_transmittance") => transmittance = Some(self.spectrum(c)?),
+                ("dielectric" | "roughdielectric", "specularTransmittance" | "specular_transmittance") => {
+                    transmittance = Some(self.spectrum(c)?)
+                }
                 ("dielectric" | "roughdielectric" | "plastic" | "roughplastic", "intIOR" | "int_ior") => int_ior = self.ior(c)?,
                 ("dielectric" | "roughdielectric" | "plastic" | "roughplastic", "extIOR" | "ext_ior") => ext_ior = self.ior(c)?,
                 ("conductor" | "roughconductor", "eta") => eta = Some(self.color(c)?),
@@ -171,7 +173,10 @@ impl<'a, 'i> Loader<'a, 'i> {
                     (Some(p), None, None) => {
                         let (_, e, kk) = MITSUBA3_CONDUCTORS.iter().find(|(m, _, _)| m.eq_ignore_ascii_case(p)).ok_or_else(|| {
                             let known: Vec<_> = MITSUBA3_CONDUCTORS.iter().map(|(m, _, _)| *m).collect();
-                            self.err(n, format!("unknown conductor material \"{p}\" (known: {}, none; or give eta and k)", known.join(", ")))
+                            self.err(
+                                n,
+                                format!("unknown conductor material \"{p}\" (known: {}, none; or give eta and k)", known.join(", ")),
+                            )
                         })?;
                         (Vec3::from(*e), Vec3::from(*kk))
                     }

@@ -43,11 +43,16 @@ impl<'a, 'i> Loader<'a, 'i> {
                 ("float", "fov") => fov = Some(self.float(c)?),
                 ("string", "fovAxis" | "fov_axis") => {
                     let v = self.required(c, "value")?;
-                    axis = FovAxis::parse(&v).ok_or_else(|| self.err(c, format!("unknown fov axis \"{v}\" (x, y, diagonal, smaller, larger)")))?;
+                    axis = FovAxis::parse(&v)
+                        .ok_or_else(|| self.err(c, format!("unknown fov axis \"{v}\" (x, y, diagonal, smaller, larger)")))?;
                 }
                 ("transform", "toWorld" | "to_world") => to_world = self.transform(c)?,
                 // Clip planes and focus distance change nothing for a pinhole camera without clipping.
-                ("float", "nearClip" | "farClip" | "focusDistance" | "shutterOpen" | "shutterClose" | "near_clip" | "far_clip" | "focus_distance" | "shutter_open" | "shutter_close") => {}
+                (
+                    "float",
+                    "nearClip" | "farClip" | "focusDistance" | "shutterOpen" | "shutterClose" | "near_clip" | "far_clip" | "focus_distance"
+                    | "shutter_open" | "shutter_close",
+                ) => {}
                 ("sampler", _) => {
                     for s in Self::elements(c) {
                         if matches!(s.attribute("name"), Some("sampleCount" | "sample_count")) {
@@ -64,7 +69,11 @@ impl<'a, 'i> Loader<'a, 'i> {
                         match (s.tag_name().name(), s.attribute("name").unwrap_or("")) {
                             ("integer", "width") => w = self.dim(s)?,
                             ("integer", "height") => h = self.dim(s)?,
-                            ("integer", "cropOffsetX" | "cropOffsetY" | "cropWidth" | "cropHeight" | "crop_offset_x" | "crop_offset_y" | "crop_width" | "crop_height") => {
+                            (
+                                "integer",
+                                "cropOffsetX" | "cropOffsetY" | "cropWidth" | "cropHeight" | "crop_offset_x" | "crop_offset_y"
+                                | "crop_width" | "crop_height",
+                            ) => {
                                 return Err(self.err(s, "film crop windows are not supported"));
                             }
                             // Output format, tone mapping and the reconstruction filter: how
@@ -91,7 +100,8 @@ impl<'a, 'i> Loader<'a, 'i> {
         }
         // The camera keeps the axis, so that a new image size (`--size`) keeps the angle along
         // it, as Mitsuba does when the film alone changes.
-        Camera::look_at_axis(position, position + forward, up, fov, axis, w, h).ok_or_else(|| self.err(n, "degenerate camera transform (zero or parallel view and up)"))
+        Camera::look_at_axis(position, position + forward, up, fov, axis, w, h)
+            .ok_or_else(|| self.err(n, "degenerate camera transform (zero or parallel view and up)"))
     }
 
     fn dim(&self, n: Node<'a, 'i>) -> Result<u32> {

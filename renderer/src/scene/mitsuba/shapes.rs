@@ -38,7 +38,8 @@ impl<'a, 'i> Loader<'a, 'i> {
                 }
                 ("ref", _) => {
                     let id = self.required(c, "id")?;
-                    let def = self.bsdfs.get(&id).cloned().ok_or_else(|| self.err(c, format!("no <bsdf id=\"{id}\"> defined before this")))?;
+                    let def =
+                        self.bsdfs.get(&id).cloned().ok_or_else(|| self.err(c, format!("no <bsdf id=\"{id}\"> defined before this")))?;
                     if bsdf.replace(def).is_some() {
                         return Err(self.err(c, "a second BSDF for this shape"));
                     }
@@ -60,7 +61,11 @@ impl<'a, 'i> Loader<'a, 'i> {
         }
         // Mitsuba's default BSDF is a grey diffuse, but black on an emitter (Mitsuba 3's Shape).
         let default_albedo = if emission.is_some() { 0.0 } else { 0.5 };
-        let def = bsdf.unwrap_or_else(|| BsdfDef { name: "default".into(), kind: MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::splat(default_albedo)) }, two_sided: false });
+        let def = bsdf.unwrap_or_else(|| BsdfDef {
+            name: "default".into(),
+            kind: MaterialKind::Lambert { albedo: ColorParam::Const(Vec3::splat(default_albedo)) },
+            two_sided: false,
+        });
         let emission = emission.unwrap_or(Vec3::ZERO);
         let obj_path = match (ty.as_str(), filename) {
             ("obj", Some(file)) => Some(self.dir.join(file)),
@@ -123,7 +128,8 @@ impl<'a, 'i> Loader<'a, 'i> {
     /// The scene material of a BSDF (emitting or not), shared between shapes that use the same
     /// BSDF without emission.
     fn material_for(&mut self, def: &BsdfDef, emission: Vec3) -> u32 {
-        let name = if emission.max_element() > 0.0 { format!("{} (emitter {})", def.name, self.b.materials.len()) } else { def.name.clone() };
+        let name =
+            if emission.max_element() > 0.0 { format!("{} (emitter {})", def.name, self.b.materials.len()) } else { def.name.clone() };
         let one_sided = !def.two_sided;
         if emission.max_element() <= 0.0 {
             if let Some(i) = self.b.materials.iter().position(|m| m.name == name && !m.is_emissive() && m.one_sided == one_sided) {

@@ -75,11 +75,17 @@ impl<'a, 'i> Loader<'a, 'i> {
                 (_, "transform", "to_uv" | "toUV") => {
                     // The 2-D affine part: x and y rows, x and y columns and the translation.
                     let m = self.transform(c)?;
-                    to_uv = Some(Affine2::from_cols(m.x_axis.truncate().truncate(), m.y_axis.truncate().truncate(), m.w_axis.truncate().truncate()));
+                    to_uv = Some(Affine2::from_cols(
+                        m.x_axis.truncate().truncate(),
+                        m.y_axis.truncate().truncate(),
+                        m.w_axis.truncate().truncate(),
+                    ));
                 }
                 ("bitmap", "string", "filename") => file = Some(self.required(c, "value")?),
                 // Filtering: ours is bilinear (no MIP maps).
-                ("bitmap", "string", "filterType" | "filter_type") | ("bitmap", "float", "maxAnisotropy") | ("bitmap", "boolean", "cache") => {}
+                ("bitmap", "string", "filterType" | "filter_type")
+                | ("bitmap", "float", "maxAnisotropy")
+                | ("bitmap", "boolean", "cache") => {}
                 ("bitmap", "string", "wrapMode" | "wrapModeU" | "wrapModeV" | "wrap_mode") => {
                     let v = self.required(c, "value")?;
                     if v != "repeat" {

@@ -43,7 +43,10 @@ impl<'a, 'i> Loader<'a, 'i> {
             let after = &rest[i + 1..];
             let len = after.find(|c: char| !(c.is_alphanumeric() || c == '_')).unwrap_or(after.len());
             let name = &after[..len];
-            let value = self.defaults.get(name).ok_or_else(|| self.err(n, format!("attribute {key}=\"{v}\" uses ${name}, which has no <default>")))?;
+            let value = self
+                .defaults
+                .get(name)
+                .ok_or_else(|| self.err(n, format!("attribute {key}=\"{v}\" uses ${name}, which has no <default>")))?;
             out.push_str(value);
             rest = &after[len..];
         }
@@ -85,7 +88,12 @@ impl<'a, 'i> Loader<'a, 'i> {
     pub(super) fn numbers(&self, n: Node<'a, 'i>, v: &str) -> Result<Vec<f32>> {
         v.split(|c: char| c == ',' || c.is_whitespace())
             .filter(|s| !s.is_empty())
-            .map(|s| s.parse::<f32>().ok().filter(|x| x.is_finite()).ok_or_else(|| self.err(n, format!("\"{s}\" in \"{v}\" is not a finite number"))))
+            .map(|s| {
+                s.parse::<f32>()
+                    .ok()
+                    .filter(|x| x.is_finite())
+                    .ok_or_else(|| self.err(n, format!("\"{s}\" in \"{v}\" is not a finite number")))
+            })
             .collect()
     }
 
@@ -150,7 +158,12 @@ impl<'a, 'i> Loader<'a, 'i> {
                 }
                 for (i, k) in ["x", "y", "z"].iter().enumerate() {
                     if let Some(s) = self.attr(op, k)? {
-                        v[i] = s.trim().parse::<f32>().ok().filter(|x| x.is_finite()).ok_or_else(|| self.err(op, format!("{k}=\"{s}\" is not a number")))?;
+                        v[i] = s
+                            .trim()
+                            .parse::<f32>()
+                            .ok()
+                            .filter(|x| x.is_finite())
+                            .ok_or_else(|| self.err(op, format!("{k}=\"{s}\" is not a number")))?;
                     }
                 }
                 Ok(v)
@@ -173,7 +186,12 @@ impl<'a, 'i> Loader<'a, 'i> {
                 "rotate" => {
                     let axis = xyz(0.0)?;
                     let angle = self.attr(op, "angle")?.ok_or_else(|| self.err(op, "missing attribute `angle`"))?;
-                    let angle: f32 = angle.trim().parse().ok().filter(|a: &f32| a.is_finite()).ok_or_else(|| self.err(op, format!("angle \"{angle}\" is not a number")))?;
+                    let angle: f32 = angle
+                        .trim()
+                        .parse()
+                        .ok()
+                        .filter(|a: &f32| a.is_finite())
+                        .ok_or_else(|| self.err(op, format!("angle \"{angle}\" is not a number")))?;
                     let axis = axis.try_normalize().ok_or_else(|| self.err(op, "the rotation axis is zero"))?;
                     Mat4::from_axis_angle(axis, angle.to_radians())
                 }
