@@ -22,7 +22,7 @@ use denoiser::method::{Method, MethodModel, Part};
 use denoiser::model::{BranchInput, DenoiserConfig, Preset};
 use denoiser::preprocess::{InputTensors, TargetTensors};
 use denoiser::rng::SplitMix64;
-use denoiser::train::schedule::{LrShape, Stage, StageKind};
+use denoiser::train::schedule::{LossScale, LrShape, Stage, StageKind};
 use denoiser::train::stage_loss;
 use denoiser::Backend;
 
@@ -82,8 +82,7 @@ fn main() {
     let method = args.get(5).map(|s| s.parse::<Method>().unwrap_or_else(|e| panic!("{e}"))).unwrap_or(Method::Guided);
     let cfg = preset.parse::<Preset>().unwrap_or_else(|e| panic!("{e}")).config();
     let backend_name = args.get(6).cloned().or_else(|| std::env::var("PIXGUIDE_BACKEND").ok()).unwrap_or_else(|| "flex".into());
-    let backend =
-        Backend::parse(&backend_name).unwrap_or_else(|| panic!("unknown backend {backend_name}: expected one of {:?}", Backend::NAMES));
+    let backend = backend_name.parse::<Backend>().unwrap_or_else(|e| panic!("{e}"));
     let device = backend.training_device().unwrap_or_else(|e| panic!("{e}"));
     let mut model = MethodModel::init(&cfg, method, &device);
     let o = size - 2 * cfg.margin();
@@ -114,7 +113,15 @@ fn main() {
     let t_spec = Tensor::<4>::random([b, 3, o, o], u, &device);
     // The first stage's loss (per-branch L1, + 0.1·L_path where the method has PathNets), as training computes it.
     let targets = TargetTensors { total: t_diff.clone() + t_spec.clone(), diffuse: t_diff, specular: t_spec };
-    let stage = Stage { kind: StageKind::Branches, steps: 1, lr_rest: None, lr_e: None, w_path: 0.1, shape: LrShape::Constant };
+    let stage = Stage {
+        kind: StageKind::Branches,
+        steps: 1,
+        lr_rest: None,
+        lr_e: None,
+        w_path: 0.1,
+        shape: LrShape::Constant,
+        loss_scale: LossScale::Absolute,
+    };
     let mut optim = AdamConfig::new().with_epsilon(1e-8).with_grad_clipping(Some(GradientClippingConfig::Value(1.0))).init();
     let mut rng = SplitMix64::new(1);
     let mut times = Vec::new();
@@ -135,7 +142,7 @@ fn main() {
             lap[k] += t;
         });
         let t_loss = Instant::now();
-        let loss = stage_loss(out, &targets, &stage, &mut rng);
+        let loss = stage_loss(out, &targets, &stage, None, &mut rng);
         let value: f32 = loss.clone().into_scalar();
         lap[4] = t_loss.elapsed().as_secs_f64();
         let t_back = Instant::now();

@@ -82,25 +82,16 @@ pub enum Backend {
     Wgpu,
 }
 
+names::named!(Backend, "backend");
+
 /// Why a backend is missing from this build: the feature to build with.
 fn not_compiled(name: &str, feature: &str, how: &str) -> String {
     format!("backend {name} is not compiled in: build with `--features {feature}` ({how}; see docs/training-tch.md)")
 }
 
 impl Backend {
-    /// Every backend name [`Backend::parse`] knows, compiled in or not.
-    pub const NAMES: [&'static str; 5] = ["flex", "tch", "tch-cuda", "cuda", "wgpu"];
-
-    pub fn parse(s: &str) -> Option<Self> {
-        match s {
-            "flex" => Some(Self::Flex),
-            "tch" | "libtorch" => Some(Self::Tch),
-            "tch-cuda" => Some(Self::TchCuda),
-            "cuda" => Some(Self::Cuda),
-            "wgpu" => Some(Self::Wgpu),
-            _ => None,
-        }
-    }
+    /// Every backend, compiled in or not (names: [`Backend::name`], parsing: `FromStr`).
+    pub const ALL: [Backend; 5] = [Self::Flex, Self::Tch, Self::TchCuda, Self::Cuda, Self::Wgpu];
 
     pub fn name(self) -> &'static str {
         match self {

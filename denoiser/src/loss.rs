@@ -5,6 +5,66 @@ use burn::tensor::{Int, Tensor, TensorData};
 use crate::layers::center_crop;
 use crate::rng::SplitMix64;
 
+/// How a branch or joint loss weighs its patches.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum LossScale {
+    /// The paper's L1, averaged over the batch: a 2-spp patch, whose noisy input is 4× further
+    /// from the reference than a 32-spp one's, counts about 4× as much.
+    #[default]
+    Absolute,
+    /// Each patch's L1 (both branches) divided by its noisy input's L1 against the same target
+    /// ([`l1_relative_to_input`]): the loss is the share of the input's error the column leaves,
+    /// so a 32-spp patch counts as much as a 2-spp one and an output worse than its input costs
+    /// more than 1 at any sample count.
+    RelativeToInput,
+}
+
+impl LossScale {
+    pub const ALL: [LossScale; 2] = [LossScale::Absolute, LossScale::RelativeToInput];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            LossScale::Absolute => "absolute",
+            LossScale::RelativeToInput => "relative-to-input",
+        }
+    }
+}
+
+crate::names::named!(LossScale, "loss scale");
+
+/// ε of [`l1_relative_to_input`]'s denominator, in branch units (demodulated diffuse, log
+/// specular): a black patch whose input is already exact divides by this, not by 0.
+pub const RELATIVE_L1_EPS: f32 = 1e-3;
+
+/// Per patch of `[B, 3, H, W]` pairs: Σ_pairs mean|x − y|, shape `[B]`.
+fn l1_per_patch(pairs: &[(Tensor<4>, Tensor<4>)]) -> Tensor<1> {
+    let mut total: Option<Tensor<1>> = None;
+    for (x, y) in pairs {
+        let [b, ..] = x.dims();
+        let d = (x.clone() - y.clone()).abs().reshape([b as i32, -1]).mean_dim(1).reshape([b]);
+        total = Some(match total {
+            Some(t) => t + d,
+            None => d,
+        });
+    }
+    total.expect("at least one pair")
+}
+
+/// mean over patches b of Σ_k mean|out_k − t_k| / (Σ_k mean|in_k − t_k| + [`RELATIVE_L1_EPS`]),
+/// k over the branches, with `(out_k, in_k, t_k)` triples of `[B, 3, H, W]` (the noisy input is
+/// cropped to the target). The denominator carries no gradient: it is data.
+pub fn l1_relative_to_input(branches: &[(Tensor<4>, Tensor<4>, Tensor<4>)]) -> Tensor<1> {
+    let out: Vec<_> = branches.iter().map(|(o, _, t)| (o.clone(), t.clone())).collect();
+    let noisy: Vec<_> = branches
+        .iter()
+        .map(|(_, i, t)| {
+            let [_, _, h, w] = t.dims();
+            (center_crop(i.clone(), h, w).detach(), t.clone())
+        })
+        .collect();
+    (l1_per_patch(&out) / l1_per_patch(&noisy).add_scalar(RELATIVE_L1_EPS)).mean()
+}
+
 /// Mean absolute error over all elements.
 pub fn l1<const D: usize>(x: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
     (x - y).abs().mean()
@@ -120,6 +180,42 @@ mod tests {
         let g = l1_tonemapped(x.clone(), img(0.5)).backward();
         let grad = crate::test_util::grad_of(&x, &g);
         assert!(grad.iter().all(|v| v.is_finite() && *v != 0.0), "{grad:?}");
+    }
+
+    /// The relative loss is each patch's share of its input's error: an output equal to the
+    /// input scores 1 (to ε), and two patches whose inputs are 10× apart but whose outputs
+    /// each halve their input's error count alike (0.5; an absolute L1 would give the noisier
+    /// patch 10× the weight). The input is cropped to the target's size first (here 4×4 → 2×2,
+    /// with a different border so that a missing crop would change the value).
+    #[test]
+    fn relative_loss_weighs_every_patch_by_its_input_error() {
+        let d = crate::cpu_training_device();
+        let (b, c, h, w) = (2usize, 3usize, 2usize, 2usize);
+        let target = tensor(&vec![1.0; b * c * h * w], [b, c, h, w], &d);
+        // Patch 0: input off by 1.0, patch 1: by 0.1 (inside the crop); the border is off by 9.
+        let noisy: Vec<f64> = (0..b * c * 16)
+            .map(|i| {
+                let (patch, y, x) = (i / (c * 16), (i % 16) / 4, i % 4);
+                let inside = (1..3).contains(&y) && (1..3).contains(&x);
+                if !inside {
+                    10.0
+                } else if patch == 0 {
+                    2.0
+                } else {
+                    1.1
+                }
+            })
+            .collect();
+        let noisy = tensor(&noisy, [b, c, 4, 4], &d);
+        let same = center_crop(noisy.clone(), h, w);
+        let identity = scalar(l1_relative_to_input(&[(same, noisy.clone(), target.clone())]));
+        // Σ_b e_b/(e_b + ε)/2 with e = 1.0 and 0.1.
+        let want = (1.0 / (1.0 + 1e-3) + 0.1 / (0.1 + 1e-3)) / 2.0;
+        assert!((identity - want).abs() < 1e-5, "identity scores {identity}, want {want}");
+        let halved = tensor(&(0..b * c * h * w).map(|i| if i < c * h * w { 1.5 } else { 1.05 }).collect::<Vec<_>>(), [b, c, h, w], &d);
+        let rel = scalar(l1_relative_to_input(&[(halved, noisy, target)]));
+        let want = (0.5 / (1.0 + 1e-3) + 0.05 / (0.1 + 1e-3)) / 2.0;
+        assert!((rel - want).abs() < 1e-5 && (rel - 0.5).abs() < 0.01, "halved scores {rel}, want {want}");
     }
 
     /// Validation scores what `pixguide eval` scores: the tensor version equals the CPU metric

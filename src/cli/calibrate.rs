@@ -33,15 +33,15 @@ pub struct CalibrateArgs {
     #[arg(long, default_value_t = 96)]
     pub patch: usize,
     /// Backend of the validation passes (flex, or tch with `--features tch`).
-    #[arg(long, default_value = "flex", value_parser = denoiser::Backend::NAMES)]
-    pub backend: String,
+    #[arg(long, value_enum, default_value_t = denoiser::Backend::Flex)]
+    pub backend: denoiser::Backend,
 }
 
 pub fn run(a: CalibrateArgs) -> Result<()> {
     if a.exponents.is_empty() || a.exponents.iter().any(|g| !g.is_finite() || *g < 0.0 || *g > 4.0) {
         bail!("--exponents: expected finite values in [0, 4], got {:?}", a.exponents);
     }
-    let backend = denoiser::Backend::parse(&a.backend).with_context(|| format!("--backend {}", a.backend))?;
+    let backend = a.backend;
     let device = backend.training_device().map_err(|e| anyhow::anyhow!("--backend {}: {e}", a.backend))?;
     let mut loaded = weights::load(&a.weights, &device).with_context(|| format!("reading {}", a.weights.display()))?;
     let Some(mskp) = loaded.config.mskp.as_ref() else {

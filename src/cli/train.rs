@@ -9,7 +9,7 @@ use denoiser::method::Method;
 use denoiser::model::{DenoiserConfig, Preset};
 use denoiser::train::data::{Dataset, LoadOptions};
 use denoiser::train::patches::Sampling;
-use denoiser::train::schedule::{self, Ablation, FinetuneLoss, LrShape, ScheduleOptions};
+use denoiser::train::schedule::{self, Ablation, FinetuneLoss, LossScale, LrShape, ScheduleOptions};
 use denoiser::train::{self as tr, Event, TrainOptions};
 use denoiser::weights::{self, Provenance};
 use std::collections::BTreeMap;
@@ -77,8 +77,8 @@ pub struct TrainArgs {
     #[arg(long, value_delimiter = ',')]
     pub spp: Vec<usize>,
     /// Patch corners: importance (method.md §7.2 map) or uniform.
-    #[arg(long, default_value = "importance")]
-    pub sampling: String,
+    #[arg(long, value_enum, default_value_t = Sampling::Importance)]
+    pub sampling: Sampling,
     /// Steps of the per-branch stage (G, P, both).
     #[arg(long)]
     pub branch_steps: Option<usize>,
@@ -101,8 +101,13 @@ pub struct TrainArgs {
     /// Loss of the finetune stage: linear (the paper's L1 on radiance) or tonemapped (L1 after
     /// the evaluation's tone map) [default: tonemapped for the U-Net presets, linear for KPCN
     /// ones].
-    #[arg(long, value_parser = FinetuneLoss::NAMES)]
-    pub finetune_loss: Option<String>,
+    #[arg(long, value_enum)]
+    pub finetune_loss: Option<FinetuneLoss>,
+    /// How the branch and joint losses weigh each patch: absolute (the paper's L1) or
+    /// relative-to-input (each patch's L1 divided by its noisy input's, so every sample count
+    /// counts alike; docs/training.md, "Loss relative to the input").
+    #[arg(long, value_enum, default_value_t = LossScale::Absolute)]
+    pub loss_scale: LossScale,
     /// Learning rate of E in the joint stage.
     #[arg(long)]
     pub lr_joint_e: Option<f64>,
@@ -144,14 +149,13 @@ pub struct TrainArgs {
     /// CPU) or tch-cuda (LibTorch on CUDA GPU 0), both with `--features tch`; cuda (burn's CUDA
     /// backend, `--features cuda`) or wgpu (`--features wgpu`). See docs/training-tch.md. Same
     /// model code and weight files on all.
-    #[arg(long, default_value = "flex", value_parser = denoiser::Backend::NAMES)]
-    pub backend: String,
+    #[arg(long, value_enum, default_value_t = denoiser::Backend::Flex)]
+    pub backend: denoiser::Backend,
 }
 
 /// The `--backend` choice, or an error naming the cargo feature a missing backend needs.
 fn backend(a: &TrainArgs) -> Result<denoiser::Backend> {
-    let b = denoiser::Backend::parse(&a.backend)
-        .with_context(|| format!("--backend {}: expected one of {}", a.backend, denoiser::Backend::NAMES.join(", ")))?;
+    let b = a.backend;
     b.device().map_err(|e| anyhow::anyhow!("--backend {}: {e}", a.backend))?;
     Ok(b)
 }
@@ -177,9 +181,10 @@ fn schedule_options(a: &TrainArgs, config: &DenoiserConfig) -> ScheduleOptions {
     setf(&mut o.lr_joint_e, a.lr_joint_e);
     setf(&mut o.lr_joint_rest, a.lr_joint_rest);
     setf(&mut o.lr_scratch, a.lr_scratch);
-    if let Some(l) = a.finetune_loss.as_deref().and_then(FinetuneLoss::parse) {
+    if let Some(l) = a.finetune_loss {
         o.finetune_loss = l;
     }
+    o.loss_scale = a.loss_scale;
     o.lr_shape = if a.lr_schedule == "constant" { LrShape::Constant } else { LrShape::WarmupCosine { warmup: a.warmup } };
     o
 }
@@ -340,7 +345,7 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
     if !(0.0..1.0).contains(&a.warmup) {
         bail!("--warmup {}: expected a fraction in [0, 1)", a.warmup);
     }
-    let sampling = Sampling::parse(&a.sampling).with_context(|| format!("--sampling {}: expected importance or uniform", a.sampling))?;
+    let sampling = a.sampling;
     let stages = schedule::plan(method, ablation, &schedule_options(&a, &config));
     let name = match ablation {
         Some(ab) => ab.name().to_string(),

@@ -29,7 +29,7 @@ use burn::module::{Module, ModuleVisitor, ParamId};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor};
 
-use crate::loss::{l1, l1_tonemapped, path_disentangling_loss, rel_mse_test};
+use crate::loss::{l1, l1_relative_to_input, l1_tonemapped, path_disentangling_loss, rel_mse_test, LossScale};
 use crate::method::{BranchNets, Method, MethodModel, MethodOutput};
 use crate::model::DenoiserConfig;
 use crate::preprocess::TargetTensors;
@@ -254,13 +254,39 @@ fn e_ids(model: &MethodModel) -> Vec<ParamId> {
     ids.0
 }
 
-/// The loss of `stage` for one forward pass.
-pub fn stage_loss(out: MethodOutput, t: &TargetTensors, stage: &Stage, rng: &mut SplitMix64) -> Tensor<1> {
+/// The noisy colour of each branch of a batch, `[B, 3, H, W]` in branch units: the denominators
+/// of [`LossScale::RelativeToInput`].
+pub struct NoisyColour {
+    pub diffuse: Tensor<4>,
+    pub specular: Tensor<4>,
+}
+
+impl NoisyColour {
+    /// The first three channels of each branch's colour block (D or ln(1 + P), preprocess.rs),
+    /// if `stage` scales its loss by them.
+    pub fn for_stage(input: &crate::preprocess::InputTensors, stage: &Stage) -> Option<Self> {
+        (stage.loss_scale == LossScale::RelativeToInput).then(|| NoisyColour {
+            diffuse: input.diffuse.colour.clone().narrow(1, 0, 3),
+            specular: input.specular.colour.clone().narrow(1, 0, 3),
+        })
+    }
+}
+
+/// The loss of `stage` for one forward pass; `noisy` is needed by a relative loss scale
+/// ([`NoisyColour::for_stage`]).
+pub fn stage_loss(out: MethodOutput, t: &TargetTensors, stage: &Stage, noisy: Option<NoisyColour>, rng: &mut SplitMix64) -> Tensor<1> {
     match stage.kind {
         StageKind::Finetune => l1(out.radiance, t.total.clone()),
         StageKind::FinetuneToneMapped => l1_tonemapped(out.radiance, t.total.clone()),
         StageKind::Branches | StageKind::Joint => {
-            let mut loss = l1(out.diffuse.output, t.diffuse.clone()) + l1(out.specular.output, t.specular.clone());
+            let mut loss = match (stage.loss_scale, noisy) {
+                (LossScale::RelativeToInput, Some(n)) => l1_relative_to_input(&[
+                    (out.diffuse.output, n.diffuse, t.diffuse.clone()),
+                    (out.specular.output, n.specular, t.specular.clone()),
+                ]),
+                (LossScale::RelativeToInput, None) => panic!("a relative loss scale needs the noisy colour (NoisyColour::for_stage)"),
+                (LossScale::Absolute, _) => l1(out.diffuse.output, t.diffuse.clone()) + l1(out.specular.output, t.specular.clone()),
+            };
             if stage.w_path > 0.0 {
                 for (p, target) in [(out.diffuse.path, &t.diffuse), (out.specular.path, &t.specular)] {
                     if let Some(p) = p {
@@ -310,8 +336,9 @@ pub fn train_step(
     e_params: &[ParamId],
     rng: &mut SplitMix64,
 ) -> Result<(MethodModel, f32), f32> {
+    let noisy = NoisyColour::for_stage(&input, stage);
     let out = model.forward(input);
-    let loss = stage_loss(out, target, stage, rng);
+    let loss = stage_loss(out, target, stage, noisy, rng);
     let value: f32 = loss.clone().into_scalar();
     if !value.is_finite() {
         return Err(value);

@@ -126,14 +126,17 @@ pub enum Sampling {
 }
 
 impl Sampling {
-    pub fn parse(s: &str) -> Option<Self> {
-        match s {
-            "importance" => Some(Sampling::Importance),
-            "uniform" => Some(Sampling::Uniform),
-            _ => None,
+    pub const ALL: [Sampling; 2] = [Sampling::Importance, Sampling::Uniform];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Sampling::Importance => "importance",
+            Sampling::Uniform => "uniform",
         }
     }
 }
+
+crate::names::named!(Sampling, "patch sampling");
 
 /// Draws top-left corners of `patch`² windows inside a `w × h` image.
 #[derive(Clone, Debug)]

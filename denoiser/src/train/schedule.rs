@@ -1,5 +1,6 @@
 //! The training schedule of method.md §3 and §6.2, and the ablations of Seed Table 2.
 
+pub use crate::loss::LossScale;
 use crate::method::Method;
 use crate::model::DenoiserConfig;
 
@@ -43,6 +44,10 @@ pub struct Stage {
     pub w_path: f64,
     /// How the rates vary over the stage's steps.
     pub shape: LrShape,
+    /// How each patch's branch or joint loss is scaled. Files and logs without the field mean
+    /// the paper's plain L1.
+    #[serde(default)]
+    pub loss_scale: LossScale,
 }
 
 /// How a stage's learning rates vary over its steps.
@@ -117,10 +122,13 @@ pub enum FinetuneLoss {
 }
 
 impl FinetuneLoss {
-    pub const NAMES: [&'static str; 2] = ["linear", "tonemapped"];
+    pub const ALL: [FinetuneLoss; 2] = [FinetuneLoss::Linear, FinetuneLoss::ToneMapped];
 
-    pub fn parse(s: &str) -> Option<Self> {
-        [FinetuneLoss::Linear, FinetuneLoss::ToneMapped].into_iter().zip(Self::NAMES).find(|(_, n)| *n == s).map(|(l, _)| l)
+    pub fn name(self) -> &'static str {
+        match self {
+            FinetuneLoss::Linear => "linear",
+            FinetuneLoss::ToneMapped => "tonemapped",
+        }
     }
 
     pub fn stage_kind(self) -> StageKind {
@@ -130,6 +138,8 @@ impl FinetuneLoss {
         }
     }
 }
+
+crate::names::named!(FinetuneLoss, "finetune loss");
 
 /// Stage lengths and learning rates (defaults: method.md §3, §6.2 rates; CPU-sized lengths).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -151,6 +161,9 @@ pub struct ScheduleOptions {
     /// The finetune stage's loss.
     #[serde(default)]
     pub finetune_loss: FinetuneLoss,
+    /// How the branch and joint losses are scaled per patch.
+    #[serde(default)]
+    pub loss_scale: LossScale,
 }
 
 impl Default for ScheduleOptions {
@@ -169,6 +182,7 @@ impl Default for ScheduleOptions {
             w_path: 0.1,
             lr_shape: LrShape::WarmupCosine { warmup: 0.05 },
             finetune_loss: FinetuneLoss::Linear,
+            loss_scale: LossScale::Absolute,
         }
     }
 }
@@ -209,6 +223,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 lr_e: Some(o.lr_joint_e),
                 w_path: o.w_path,
                 shape: o.lr_shape,
+                loss_scale: o.loss_scale,
             }]
         }
         (_, Some(Ablation::FixNTrain)) => {
@@ -220,6 +235,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 lr_e: Some(o.lr_joint_e),
                 w_path: 0.0,
                 shape: o.lr_shape,
+                loss_scale: o.loss_scale,
             }]
         }
         (_, Some(Ablation::FullNFull)) => {
@@ -230,6 +246,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 lr_e: Some(o.lr_scratch),
                 w_path: o.w_path,
                 shape: o.lr_shape,
+                loss_scale: o.loss_scale,
             }]
         }
         (m, _) => vec![
@@ -240,6 +257,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 lr_e: None,
                 w_path: path(m),
                 shape: o.lr_shape,
+                loss_scale: o.loss_scale,
             },
             Stage {
                 kind: o.finetune_loss.stage_kind(),
@@ -248,6 +266,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 lr_e: None,
                 w_path: 0.0,
                 shape: o.lr_shape,
+                loss_scale: o.loss_scale,
             },
         ],
     }
@@ -272,6 +291,7 @@ mod tests {
             lr_e: None,
             w_path: 0.0,
             shape: LrShape::WarmupCosine { warmup: 0.05 },
+            loss_scale: LossScale::Absolute,
         };
         assert!((s.lr_factor(0) - 0.1).abs() < 1e-12);
         assert!((s.lr_factor(10) - 1.0).abs() < 1e-12);

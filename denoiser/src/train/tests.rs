@@ -9,8 +9,8 @@ use data::Shot;
 use film::descriptors::{field, FIELDS};
 use film::{Descriptors, Frame, PixelBuffer};
 use patches::PatchSampler;
-use schedule::LrShape;
 use schedule::ScheduleOptions;
+use schedule::{LossScale, LrShape};
 
 fn tiny() -> DenoiserConfig {
     DenoiserConfig::new(
@@ -146,7 +146,15 @@ fn tiny_model_fits_a_fixed_batch() {
     let o = options(Method::P, None, &short());
     let dev = crate::cpu_training_device();
     let mut model = initial_model(&o, None, None, &dev).unwrap();
-    let stage = Stage { kind: StageKind::Branches, steps: 30, lr_rest: Some(1e-3), lr_e: None, w_path: 0.1, shape: LrShape::Constant };
+    let stage = Stage {
+        kind: StageKind::Branches,
+        steps: 30,
+        lr_rest: Some(1e-3),
+        lr_e: None,
+        w_path: 0.1,
+        shape: LrShape::Constant,
+        loss_scale: LossScale::Absolute,
+    };
     let (refs, _) = draw_batch(&data, &o, 0, 0);
     let mut optim = optimizer();
     let mut losses = Vec::new();
@@ -158,6 +166,40 @@ fn tiny_model_fits_a_fixed_batch() {
         losses.push(loss);
     }
     let (first, last) = (losses[0], *losses.last().unwrap());
+    assert!(last < 0.8 * first, "loss {first} → {last}: {losses:?}");
+}
+
+/// The same fit with each patch's loss relative to its input's error: the loss starts near 1
+/// (a near-box filter leaves about the input's error, give or take), falls well below it, and
+/// every value is finite (no division by a zero-error patch).
+#[test]
+fn tiny_model_fits_a_fixed_batch_relative_to_its_input() {
+    let data = dataset();
+    let o = options(Method::G, None, &short());
+    let dev = crate::cpu_training_device();
+    let mut model = initial_model(&o, None, None, &dev).unwrap();
+    let stage = Stage {
+        kind: StageKind::Branches,
+        steps: 30,
+        lr_rest: Some(1e-3),
+        lr_e: None,
+        w_path: 0.0,
+        shape: LrShape::Constant,
+        loss_scale: LossScale::RelativeToInput,
+    };
+    let (refs, _) = draw_batch(&data, &o, 0, 0);
+    let mut optim = optimizer();
+    let mut losses = Vec::new();
+    for step in 0..30 {
+        let (input, target) = batch_tensors(&data.train, &refs, &data.spps, PATCH, o.config.margin(), true, &dev);
+        let mut rng = SplitMix64::new(step);
+        let (m, loss) = train_step(model, &mut optim, input, &target, &stage, 1.0, &[], &mut rng).unwrap();
+        model = m;
+        losses.push(loss);
+    }
+    let (first, last) = (losses[0], *losses.last().unwrap());
+    assert!(losses.iter().all(|l| l.is_finite()), "{losses:?}");
+    assert!((0.1..10.0).contains(&first), "a fresh model's relative loss is {first}, expected about 1");
     assert!(last < 0.8 * first, "loss {first} → {last}: {losses:?}");
 }
 
