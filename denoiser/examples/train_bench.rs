@@ -57,24 +57,7 @@ fn main() {
                     b.path = b.path.take().map(denoiser::burn::module::Module::no_grad);
                 }
             }
-            let opts = TrainOptions {
-                method: *m,
-                ablation: None,
-                config: cfg,
-                seed: 1,
-                patch,
-                batch,
-                stages: vec![st.clone()],
-                augment: true,
-                val_every: 0,
-                val_batch: 8,
-                patience: None,
-                checkpoint_every: 0,
-                minutes: None,
-                pause_after: None,
-                backend: Default::default(),
-                metadata: Default::default(),
-            };
+            let opts = TrainOptions { seed: 1, augment: true, ..TrainOptions::new(*m, cfg, patch, batch, vec![st.clone()]) };
             (Some(model), optimizer(), opts, Vec::<f64>::new())
         })
         .collect();

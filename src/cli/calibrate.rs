@@ -10,7 +10,6 @@ use denoiser::train::data::{Dataset, LoadOptions};
 use denoiser::train::patches::Sampling;
 use denoiser::train::TrainOptions;
 use denoiser::weights;
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -62,24 +61,7 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
     let t0 = Instant::now();
     let data = Dataset::load(&a.data, &load, &mut |_, _| {})?;
     eprintln!("{}: {} validation shots {}×{} at {:?} spp", a.data.display(), data.val.len(), data.width, data.height, data.spps);
-    let opts = TrainOptions {
-        method,
-        ablation: None,
-        config: loaded.config.clone(),
-        seed: loaded.config.seed,
-        patch: a.patch,
-        batch: 1,
-        stages: Vec::new(),
-        augment: false,
-        val_every: 0,
-        val_batch: 8,
-        patience: None,
-        checkpoint_every: 0,
-        minutes: None,
-        pause_after: None,
-        metadata: BTreeMap::new(),
-        backend,
-    };
+    let opts = TrainOptions { backend, ..TrainOptions::new(method, loaded.config.clone(), a.patch, 1, Vec::new()) };
     let bar = progress::bar(a.exponents.len() as u64, "calibrating");
     let spps = data.spps.clone();
     let cal = calibrate_guide_gain(&mut loaded.model, &data, &opts, &a.exponents, &mut |g, v| {

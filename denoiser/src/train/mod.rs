@@ -87,6 +87,31 @@ pub struct TrainOptions {
 }
 
 impl TrainOptions {
+    /// A run of `method` with `config`'s networks on `patch`² patches, `batch` at a time,
+    /// through `stages`; the rest quiet: the config's seed, no augmentation, validation once
+    /// per epoch in passes of 8 patches, no patience, budget, pause or provenance, checkpoints
+    /// only at stage ends, the flex backend. Callers set what they need with `..`.
+    pub fn new(method: Method, config: DenoiserConfig, patch: usize, batch: usize, stages: Vec<Stage>) -> Self {
+        TrainOptions {
+            method,
+            ablation: None,
+            seed: config.seed,
+            config,
+            patch,
+            batch,
+            stages,
+            augment: false,
+            val_every: 0,
+            val_batch: 8,
+            patience: None,
+            checkpoint_every: 0,
+            minutes: None,
+            pause_after: None,
+            metadata: BTreeMap::new(),
+            backend: crate::Backend::Flex,
+        }
+    }
+
     /// The parts a resume must agree on.
     fn fingerprint(&self) -> String {
         format!(
