@@ -1,4 +1,5 @@
-//! The command-line names of the enums a user picks from ([`Method`], [`Preset`], [`Ablation`]):
+//! The command-line names of the enums a user picks from ([`Method`], [`Preset`], [`Ablation`],
+//! [`Backend`], [`FinetuneLoss`], [`LossScale`], [`Sampling`]):
 //! each enum lists its values in `ALL` and spells them in `name()`, the only place the names
 //! are written; `named!` derives parsing, printing and (with the `clap` feature, which the
 //! binary turns on) `clap::ValueEnum` from those two, so that every command lists the same
@@ -7,6 +8,10 @@
 //! [`Method`]: crate::method::Method
 //! [`Preset`]: crate::model::Preset
 //! [`Ablation`]: crate::train::schedule::Ablation
+//! [`Backend`]: crate::Backend
+//! [`FinetuneLoss`]: crate::train::schedule::FinetuneLoss
+//! [`LossScale`]: crate::loss::LossScale
+//! [`Sampling`]: crate::train::patches::Sampling
 
 /// A name that is none of an enum's values.
 #[derive(Debug, thiserror::Error)]
