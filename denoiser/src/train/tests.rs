@@ -133,6 +133,27 @@ fn train(data: &Dataset, o: &TrainOptions, dir: Option<&Path>, resume: bool) -> 
     run(data, o, m, dir, resume, &mut |_| {}).unwrap()
 }
 
+/// The losses of 30 Adam steps at lr 1e-3 on one fixed batch of a fresh tiny `method` model.
+fn fit_fixed_batch(method: Method, w_path: f64, loss_scale: LossScale) -> Vec<f32> {
+    let data = dataset();
+    let o = options(method, None, &short());
+    let dev = crate::cpu_training_device();
+    let mut model = initial_model(&o, None, None, &dev).unwrap();
+    let stage =
+        Stage { kind: StageKind::Branches, steps: 30, lr_rest: Some(1e-3), lr_e: None, w_path, shape: LrShape::Constant, loss_scale };
+    let (refs, _) = draw_batch(&data, &o, 0, 0);
+    let mut optim = optimizer();
+    let mut losses = Vec::new();
+    for step in 0..30 {
+        let (input, target) = batch_tensors(&data.train, &refs, &data.spps, PATCH, o.config.margin(), true, &dev);
+        let mut rng = SplitMix64::new(step);
+        let (m, loss) = train_step(model, &mut optim, input, &target, &stage, 1.0, &[], &mut rng).unwrap();
+        model = m;
+        losses.push(loss);
+    }
+    losses
+}
+
 /// ~30 Adam steps on one fixed batch (so the loss is a deterministic function of the weights)
 /// must lower the per-branch L1 of a tiny P model (PathNet + D_P, L_path on) well below its
 /// start. At lr 1e-3 the tiny model can fit one batch much better than its initial (near-box
@@ -142,29 +163,7 @@ fn train(data: &Dataset, o: &TrainOptions, dir: Option<&Path>, resume: bool) -> 
 /// output) leaves the ratio ≥ 1.
 #[test]
 fn tiny_model_fits_a_fixed_batch() {
-    let data = dataset();
-    let o = options(Method::P, None, &short());
-    let dev = crate::cpu_training_device();
-    let mut model = initial_model(&o, None, None, &dev).unwrap();
-    let stage = Stage {
-        kind: StageKind::Branches,
-        steps: 30,
-        lr_rest: Some(1e-3),
-        lr_e: None,
-        w_path: 0.1,
-        shape: LrShape::Constant,
-        loss_scale: LossScale::Absolute,
-    };
-    let (refs, _) = draw_batch(&data, &o, 0, 0);
-    let mut optim = optimizer();
-    let mut losses = Vec::new();
-    for step in 0..30 {
-        let (input, target) = batch_tensors(&data.train, &refs, &data.spps, PATCH, o.config.margin(), true, &dev);
-        let mut rng = SplitMix64::new(step);
-        let (m, loss) = train_step(model, &mut optim, input, &target, &stage, 1.0, &[], &mut rng).unwrap();
-        model = m;
-        losses.push(loss);
-    }
+    let losses = fit_fixed_batch(Method::P, 0.1, LossScale::Absolute);
     let (first, last) = (losses[0], *losses.last().unwrap());
     assert!(last < 0.8 * first, "loss {first} → {last}: {losses:?}");
 }
@@ -174,29 +173,7 @@ fn tiny_model_fits_a_fixed_batch() {
 /// every value is finite (no division by a zero-error patch).
 #[test]
 fn tiny_model_fits_a_fixed_batch_relative_to_its_input() {
-    let data = dataset();
-    let o = options(Method::G, None, &short());
-    let dev = crate::cpu_training_device();
-    let mut model = initial_model(&o, None, None, &dev).unwrap();
-    let stage = Stage {
-        kind: StageKind::Branches,
-        steps: 30,
-        lr_rest: Some(1e-3),
-        lr_e: None,
-        w_path: 0.0,
-        shape: LrShape::Constant,
-        loss_scale: LossScale::RelativeToInput,
-    };
-    let (refs, _) = draw_batch(&data, &o, 0, 0);
-    let mut optim = optimizer();
-    let mut losses = Vec::new();
-    for step in 0..30 {
-        let (input, target) = batch_tensors(&data.train, &refs, &data.spps, PATCH, o.config.margin(), true, &dev);
-        let mut rng = SplitMix64::new(step);
-        let (m, loss) = train_step(model, &mut optim, input, &target, &stage, 1.0, &[], &mut rng).unwrap();
-        model = m;
-        losses.push(loss);
-    }
+    let losses = fit_fixed_batch(Method::G, 0.0, LossScale::RelativeToInput);
     let (first, last) = (losses[0], *losses.last().unwrap());
     assert!(losses.iter().all(|l| l.is_finite()), "{losses:?}");
     assert!((0.1..10.0).contains(&first), "a fresh model's relative loss is {first}, expected about 1");
