@@ -17,15 +17,30 @@ pub enum LossScale {
     /// so a 32-spp patch counts as much as a 2-spp one and an output worse than its input costs
     /// more than 1 at any sample count.
     RelativeToInput,
+    /// Each patch's L1 divided by the square root of its noisy input's L1: halfway, in powers,
+    /// between [`LossScale::Absolute`] and [`LossScale::RelativeToInput`]. A 32-spp patch counts
+    /// about half as much as a 2-spp one (the absolute L1: a quarter), so the low sample counts
+    /// keep more of the gradient than under the fully relative loss.
+    RelativeToSqrtInput,
 }
 
 impl LossScale {
-    pub const ALL: [LossScale; 2] = [LossScale::Absolute, LossScale::RelativeToInput];
+    pub const ALL: [LossScale; 3] = [LossScale::Absolute, LossScale::RelativeToInput, LossScale::RelativeToSqrtInput];
 
     pub fn name(self) -> &'static str {
         match self {
             LossScale::Absolute => "absolute",
             LossScale::RelativeToInput => "relative-to-input",
+            LossScale::RelativeToSqrtInput => "relative-to-sqrt-input",
+        }
+    }
+
+    /// The power of the input's error that divides a patch's L1, or `None` for the absolute L1.
+    pub fn input_power(self) -> Option<f32> {
+        match self {
+            LossScale::Absolute => None,
+            LossScale::RelativeToInput => Some(1.0),
+            LossScale::RelativeToSqrtInput => Some(0.5),
         }
     }
 }
@@ -50,10 +65,10 @@ fn l1_per_patch(pairs: &[(Tensor<4>, Tensor<4>)]) -> Tensor<1> {
     total.expect("at least one pair")
 }
 
-/// mean over patches b of Σ_k mean|out_k − t_k| / (Σ_k mean|in_k − t_k| + [`RELATIVE_L1_EPS`]),
+/// mean over patches b of Σ_k mean|out_k − t_k| / (Σ_k mean|in_k − t_k| + [`RELATIVE_L1_EPS`])^power,
 /// k over the branches, with `(out_k, in_k, t_k)` triples of `[B, 3, H, W]` (the noisy input is
 /// cropped to the target). The denominator carries no gradient: it is data.
-pub fn l1_relative_to_input(branches: &[(Tensor<4>, Tensor<4>, Tensor<4>)]) -> Tensor<1> {
+pub fn l1_relative_to_input(branches: &[(Tensor<4>, Tensor<4>, Tensor<4>)], power: f32) -> Tensor<1> {
     let out: Vec<_> = branches.iter().map(|(o, _, t)| (o.clone(), t.clone())).collect();
     let noisy: Vec<_> = branches
         .iter()
@@ -62,7 +77,9 @@ pub fn l1_relative_to_input(branches: &[(Tensor<4>, Tensor<4>, Tensor<4>)]) -> T
             (center_crop(i.clone(), h, w).detach(), t.clone())
         })
         .collect();
-    (l1_per_patch(&out) / l1_per_patch(&noisy).add_scalar(RELATIVE_L1_EPS)).mean()
+    let denominator = l1_per_patch(&noisy).add_scalar(RELATIVE_L1_EPS);
+    let denominator = if power == 1.0 { denominator } else { denominator.powf_scalar(power) };
+    (l1_per_patch(&out) / denominator).mean()
 }
 
 /// Mean absolute error over all elements.
@@ -208,14 +225,18 @@ mod tests {
             .collect();
         let noisy = tensor(&noisy, [b, c, 4, 4], &d);
         let same = center_crop(noisy.clone(), h, w);
-        let identity = scalar(l1_relative_to_input(&[(same, noisy.clone(), target.clone())]));
+        let identity = scalar(l1_relative_to_input(&[(same, noisy.clone(), target.clone())], 1.0));
         // Σ_b e_b/(e_b + ε)/2 with e = 1.0 and 0.1.
         let want = (1.0 / (1.0 + 1e-3) + 0.1 / (0.1 + 1e-3)) / 2.0;
         assert!((identity - want).abs() < 1e-5, "identity scores {identity}, want {want}");
         let halved = tensor(&(0..b * c * h * w).map(|i| if i < c * h * w { 1.5 } else { 1.05 }).collect::<Vec<_>>(), [b, c, h, w], &d);
-        let rel = scalar(l1_relative_to_input(&[(halved, noisy, target)]));
+        let rel = scalar(l1_relative_to_input(&[(halved.clone(), noisy.clone(), target.clone())], 1.0));
         let want = (0.5 / (1.0 + 1e-3) + 0.05 / (0.1 + 1e-3)) / 2.0;
         assert!((rel - want).abs() < 1e-5 && (rel - 0.5).abs() < 0.01, "halved scores {rel}, want {want}");
+        // Under the square root the noisier patch counts √10 ≈ 3.2× as much, not 1× or 10×.
+        let sqrt = scalar(l1_relative_to_input(&[(halved, noisy, target)], 0.5));
+        let want = (0.5 / (1.0f64 + 1e-3).sqrt() + 0.05 / (0.1f64 + 1e-3).sqrt()) / 2.0;
+        assert!((sqrt - want).abs() < 1e-5, "halved under the square root scores {sqrt}, want {want}");
     }
 
     /// Validation scores what `pixguide eval` scores: the tensor version equals the CPU metric

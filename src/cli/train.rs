@@ -105,7 +105,8 @@ pub struct TrainArgs {
     pub finetune_loss: Option<FinetuneLoss>,
     /// How the branch and joint losses weigh each patch: absolute (the paper's L1) or
     /// relative-to-input (each patch's L1 divided by its noisy input's, so every sample count
-    /// counts alike; docs/training.md, "Loss relative to the input").
+    /// counts alike) or relative-to-sqrt-input (divided by the square root of it: in between);
+    /// docs/training.md, "Loss relative to the input".
     #[arg(long, value_enum, default_value_t = LossScale::Absolute)]
     pub loss_scale: LossScale,
     /// Learning rate of E in the joint stage.

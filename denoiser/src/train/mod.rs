@@ -280,7 +280,7 @@ fn e_ids(model: &MethodModel) -> Vec<ParamId> {
 }
 
 /// The noisy colour of each branch of a batch, `[B, 3, H, W]` in branch units: the denominators
-/// of [`LossScale::RelativeToInput`].
+/// of the relative loss scales ([`LossScale::input_power`]).
 pub struct NoisyColour {
     pub diffuse: Tensor<4>,
     pub specular: Tensor<4>,
@@ -290,7 +290,7 @@ impl NoisyColour {
     /// The first three channels of each branch's colour block (D or ln(1 + P), preprocess.rs),
     /// if `stage` scales its loss by them.
     pub fn for_stage(input: &crate::preprocess::InputTensors, stage: &Stage) -> Option<Self> {
-        (stage.loss_scale == LossScale::RelativeToInput).then(|| NoisyColour {
+        stage.loss_scale.input_power().map(|_| NoisyColour {
             diffuse: input.diffuse.colour.clone().narrow(1, 0, 3),
             specular: input.specular.colour.clone().narrow(1, 0, 3),
         })
@@ -304,13 +304,13 @@ pub fn stage_loss(out: MethodOutput, t: &TargetTensors, stage: &Stage, noisy: Op
         StageKind::Finetune => l1(out.radiance, t.total.clone()),
         StageKind::FinetuneToneMapped => l1_tonemapped(out.radiance, t.total.clone()),
         StageKind::Branches | StageKind::Joint => {
-            let mut loss = match (stage.loss_scale, noisy) {
-                (LossScale::RelativeToInput, Some(n)) => l1_relative_to_input(&[
-                    (out.diffuse.output, n.diffuse, t.diffuse.clone()),
-                    (out.specular.output, n.specular, t.specular.clone()),
-                ]),
-                (LossScale::RelativeToInput, None) => panic!("a relative loss scale needs the noisy colour (NoisyColour::for_stage)"),
-                (LossScale::Absolute, _) => l1(out.diffuse.output, t.diffuse.clone()) + l1(out.specular.output, t.specular.clone()),
+            let mut loss = match (stage.loss_scale.input_power(), noisy) {
+                (Some(power), Some(n)) => l1_relative_to_input(
+                    &[(out.diffuse.output, n.diffuse, t.diffuse.clone()), (out.specular.output, n.specular, t.specular.clone())],
+                    power,
+                ),
+                (Some(_), None) => panic!("a relative loss scale needs the noisy colour (NoisyColour::for_stage)"),
+                (None, _) => l1(out.diffuse.output, t.diffuse.clone()) + l1(out.specular.output, t.specular.clone()),
             };
             if stage.w_path > 0.0 {
                 for (p, target) in [(out.diffuse.path, &t.diffuse), (out.specular.path, &t.specular)] {
