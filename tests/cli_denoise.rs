@@ -2,8 +2,11 @@
 //! randomly initialised weight files (the point is the plumbing — buffers, descriptors, weight
 //! files, tiling, outputs, errors — not the image quality, which needs trained weights).
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+
+use common::{failed, ok, out_dir, pixguide, s};
 
 use denoiser::ensemble::EnsembleConfig;
 use denoiser::kpcn::KpcnConfig;
@@ -12,20 +15,6 @@ use denoiser::model::DenoiserConfig;
 use denoiser::pathnet::PathNetConfig;
 use denoiser::weights::{save, Provenance};
 use renderer::film::exr_io::read_frame;
-
-fn pixguide(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_pixguide")).args(args).current_dir(env!("CARGO_MANIFEST_DIR")).output().unwrap()
-}
-
-fn out_dir(name: &str) -> PathBuf {
-    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// A randomly initialised tiny model of `method`, saved as a weight file.
 fn tiny_weights(dir: &Path, method: Method) -> PathBuf {
@@ -38,16 +27,6 @@ fn tiny_weights(dir: &Path, method: Method) -> PathBuf {
     let path = dir.join(format!("{}-tiny.safetensors", method.name()));
     save(&path, &model, &cfg, "tiny", &Provenance { command: "tests/cli_denoise.rs".into(), ..Default::default() }).unwrap();
     path
-}
-
-fn ok(out: &Output, what: &str) -> String {
-    assert!(out.status.success(), "{what} failed: {}", String::from_utf8_lossy(&out.stderr));
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn failed(out: &Output, what: &str) -> String {
-    assert!(!out.status.success(), "{what} should have failed");
-    String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
 fn assert_finite_image(path: &Path, w: u32, h: u32) {

@@ -6,35 +6,15 @@
 //! Without it these tests fail (they are required in CI), except the one that makes OIDN
 //! unavailable on purpose.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
+
+use common::{ok, out_dir, pixguide, root, row, s, scene_list};
 
 use denoiser::metrics;
 use renderer::film::exr_io::read_frame;
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn pixguide(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_pixguide")).args(args).current_dir(root()).output().unwrap()
-}
-
-fn out_dir(name: &str) -> PathBuf {
-    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
-    std::fs::remove_dir_all(&d).ok();
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn ok(out: &Output, what: &str) -> String {
-    assert!(out.status.success(), "{what} failed: {}", String::from_utf8_lossy(&out.stderr));
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
 
 /// The committed 8000-spp reference of the Cornell box (128×128).
 fn reference() -> PathBuf {
@@ -112,31 +92,12 @@ fn oidn_refuses_weights_options() {
     );
 }
 
-/// A scene list in `dir` naming the shipped Cornell box, with its reference beside it.
-fn scene_list(dir: &Path) -> PathBuf {
-    std::fs::create_dir_all(dir.join("references")).unwrap();
-    for ext in ["exr", "json"] {
-        std::fs::copy(root().join(format!("scenes/references/cornell-box.{ext}")), dir.join(format!("references/cornell-box.{ext}")))
-            .unwrap();
-    }
-    let list = dir.join("list.txt");
-    std::fs::write(&list, format!("{}\n", root().join("scenes/cornell-box/scene.toml").display())).unwrap();
-    list
-}
-
-/// The cells after the label of the first row starting with `| label |` after `heading`.
-fn row<'a>(md: &'a str, heading: &str, label: &str) -> Vec<&'a str> {
-    let section = &md[md.find(heading).unwrap_or_else(|| panic!("no `{heading}` in\n{md}"))..];
-    let line = section.lines().find(|l| l.starts_with(&format!("| {label} |"))).unwrap_or_else(|| panic!("no row {label} after {heading}"));
-    line.trim_matches('|').split('|').map(str::trim).skip(1).collect()
-}
-
 /// `eval` with the oidn method: its row in the quality, time and breakdown tables (below noisy,
 /// with positive times), its panel in the pictures, and its measurements cached by version.
 #[test]
 fn eval_has_an_oidn_row_curve_and_panel() {
     let base = out_dir("cli-oidn-eval");
-    let list = scene_list(&base.join("scenes"));
+    let list = scene_list(&base.join("scenes"), true);
     let out = base.join("out/results.md");
     let args = [
         "eval",
@@ -200,7 +161,7 @@ fn eval_has_an_oidn_row_curve_and_panel() {
 #[test]
 fn eval_without_oidn_says_why_once_and_goes_on() {
     let base = out_dir("cli-oidn-missing");
-    let list = scene_list(&base.join("scenes"));
+    let list = scene_list(&base.join("scenes"), true);
     let blocker = base.join("not-a-folder");
     std::fs::write(&blocker, "a file where the venv's parent folder should be").unwrap();
     let out = base.join("out/results.md");

@@ -56,11 +56,18 @@ pub struct Provenance {
     pub notes: String,
 }
 
+/// The stem of a model's weight file, `<ablation or method>-<preset>` (`guided-default`,
+/// `fix-n-train-default`, `guided-half`): what `pixguide train --all` writes and `pixguide eval`
+/// looks for.
+pub fn file_stem(method: Method, ablation: Option<crate::train::schedule::Ablation>, preset: crate::model::Preset) -> String {
+    format!("{}-{preset}", ablation.map_or(method.name(), |a| a.name()))
+}
+
 /// Where the shipped weights of `method` live: `denoiser/weights/<method>-default.safetensors`
 /// under the current directory if that exists (a checkout run from its root), else in the
 /// source tree this crate was built from.
 pub fn default_path(method: Method) -> PathBuf {
-    let name = format!("{}-default.safetensors", method.name());
+    let name = format!("{}.safetensors", file_stem(method, None, crate::model::Preset::Default));
     let rel = Path::new("denoiser/weights").join(&name);
     if rel.exists() {
         return rel;

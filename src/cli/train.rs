@@ -194,7 +194,6 @@ fn schedule_options(a: &TrainArgs, config: &DenoiserConfig) -> ScheduleOptions {
 /// (branch, finetune, joint-or-scratch steps) and the estimated seconds per step on this
 /// machine without other load (docs/training.md), which sets its share of a --minutes budget.
 struct PlanItem {
-    name: &'static str,
     method: Method,
     ablation: Option<Ablation>,
     preset: Preset,
@@ -202,15 +201,8 @@ struct PlanItem {
     secs_per_step: f64,
 }
 
-const fn item(
-    name: &'static str,
-    method: Method,
-    ablation: Option<Ablation>,
-    preset: Preset,
-    steps: [usize; 3],
-    secs_per_step: f64,
-) -> PlanItem {
-    PlanItem { name, method, ablation, preset, steps, secs_per_step }
+const fn item(method: Method, ablation: Option<Ablation>, preset: Preset, steps: [usize; 3], secs_per_step: f64) -> PlanItem {
+    PlanItem { method, ablation, preset, steps, secs_per_step }
 }
 
 /// The runs of 2026-11-25 (docs/denoiser.md, "The swap models"): step counts that fill
@@ -219,17 +211,17 @@ const fn item(
 /// tone-mapped finetune. both keeps its earlier count: no both run of the current U-Net has
 /// trained stably yet (docs/training.md). ≈ 3 h for the whole plan.
 const PLAN: [PlanItem; 10] = [
-    item("g", Method::G, None, Preset::Default, [2900, 400, 0], 0.63),
-    item("p", Method::P, None, Preset::Default, [600, 0, 0], 3.4),
-    item("both", Method::Both, None, Preset::Default, [250, 0, 0], 3.5),
-    item("guided", Method::Guided, None, Preset::Default, [0, 0, 200], 4.5),
-    item("fix-n-train", Method::Guided, Some(Ablation::FixNTrain), Preset::Default, [0, 0, 200], 1.5),
-    item("radiance-only", Method::Guided, Some(Ablation::RadianceOnly), Preset::Default, [0, 0, 200], 4.5),
-    item("full-n-full", Method::Guided, Some(Ablation::FullNFull), Preset::Default, [0, 0, 400], 5.0),
+    item(Method::G, None, Preset::Default, [2900, 400, 0], 0.63),
+    item(Method::P, None, Preset::Default, [600, 0, 0], 3.4),
+    item(Method::Both, None, Preset::Default, [250, 0, 0], 3.5),
+    item(Method::Guided, None, Preset::Default, [0, 0, 200], 4.5),
+    item(Method::Guided, Some(Ablation::FixNTrain), Preset::Default, [0, 0, 200], 1.5),
+    item(Method::Guided, Some(Ablation::RadianceOnly), Preset::Default, [0, 0, 200], 4.5),
+    item(Method::Guided, Some(Ablation::FullNFull), Preset::Default, [0, 0, 400], 5.0),
     // The half models get their default twins' step counts, so the sizes differ only in width.
-    item("g", Method::G, None, Preset::Half, [2900, 400, 0], 0.45),
-    item("p", Method::P, None, Preset::Half, [600, 0, 0], 2.5),
-    item("guided", Method::Guided, None, Preset::Half, [0, 0, 200], 3.5),
+    item(Method::G, None, Preset::Half, [2900, 400, 0], 0.45),
+    item(Method::P, None, Preset::Half, [600, 0, 0], 2.5),
+    item(Method::Guided, None, Preset::Half, [0, 0, 200], 3.5),
 ];
 
 fn run_all(a: TrainArgs) -> Result<()> {
@@ -242,11 +234,13 @@ fn run_all(a: TrainArgs) -> Result<()> {
         PLAN.iter().map(|it| steps(it) as f64).sum::<f64>(),
         weight.iter().sum::<f64>() / 60.0
     );
-    let path = |name: &str, preset: Preset| a.out_dir.join(format!("{name}-{preset}.safetensors"));
+    let path = |method: Method, ablation: Option<Ablation>, preset: Preset| {
+        a.out_dir.join(format!("{}.safetensors", weights::file_stem(method, ablation, preset)))
+    };
     let start = Instant::now();
     let mut cache = DataCache::new();
     for (k, it) in PLAN.iter().enumerate() {
-        let out = path(it.name, it.preset);
+        let out = path(it.method, it.ablation, it.preset);
         if out.exists() {
             println!("[{}/{}] {} exists, skipped", k + 1, PLAN.len(), out.display());
             continue;
@@ -265,8 +259,8 @@ fn run_all(a: TrainArgs) -> Result<()> {
         r.scratch_steps = Some(j);
         r.resume = true;
         if it.method == Method::Guided && it.ablation != Some(Ablation::FullNFull) {
-            r.from_g = Some(path("g", it.preset));
-            r.from_p = Some(path("p", it.preset));
+            r.from_g = Some(path(Method::G, None, it.preset));
+            r.from_p = Some(path(Method::P, None, it.preset));
         }
         // Each run's share of the whole budget, in proportion to its expected cost; whatever
         // earlier runs left unused goes to the later ones.
@@ -279,7 +273,7 @@ fn run_all(a: TrainArgs) -> Result<()> {
             "[{}/{}] {} ({}){}",
             k + 1,
             PLAN.len(),
-            it.name,
+            it.ablation.map_or(it.method.name(), |ab| ab.name()),
             it.preset,
             r.minutes.map(|m| format!(", budget {m:.1} min")).unwrap_or_default()
         );

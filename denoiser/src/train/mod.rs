@@ -29,7 +29,7 @@ use burn::module::{Module, ModuleVisitor, ParamId};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor};
 
-use crate::loss::{l1, l1_relative_to_input, l1_tonemapped, path_disentangling_loss, rel_mse_test, LossScale};
+use crate::loss::{l1, l1_relative_to_input, l1_tonemapped, path_disentangling_loss, rel_mse_test};
 use crate::method::{BranchNets, Method, MethodModel, MethodOutput};
 use crate::model::DenoiserConfig;
 use crate::preprocess::TargetTensors;
@@ -280,7 +280,7 @@ fn e_ids(model: &MethodModel) -> Vec<ParamId> {
 }
 
 /// The noisy colour of each branch of a batch, `[B, 3, H, W]` in branch units: the denominators
-/// of the relative loss scales ([`LossScale::input_power`]).
+/// of the relative loss scales ([`crate::loss::LossScale::input_power`]).
 pub struct NoisyColour {
     pub diffuse: Tensor<4>,
     pub specular: Tensor<4>,

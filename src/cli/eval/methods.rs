@@ -5,35 +5,117 @@ use super::cache::file_id;
 use super::EvalArgs;
 use anyhow::{bail, Context, Result};
 use denoiser::method::Method;
+use denoiser::model::Preset;
 use denoiser::oidn::Oidn;
+use denoiser::train::schedule::Ablation;
 use denoiser::weights::{self, Loaded};
 use std::path::PathBuf;
 
-/// Methods `eval` knows: name, weight file stem, label in tables and plots.
-pub const KNOWN: [(&str, &str, &str); 8] = [
-    ("g", "g-default", "D_G (g)"),
-    ("p", "p-default", "D_P (p)"),
-    ("both", "both-default", "both-buffers"),
-    ("guided", "guided-default", "guided"),
-    ("guided-half", "guided-half", "guided (half)"),
-    ("fix-n-train", "fix-n-train-default", "Fix-N-Train"),
-    ("full-n-full", "full-n-full-default", "Full-N-Full"),
-    ("radiance-only", "radiance-only-default", "E radiances only"),
-];
+/// The methods `eval` compares; `ALL` and `name()` are the only place their names are written
+/// (`--methods` parses them, the cache keys and the page print them).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EvalMethod {
+    /// Plain Monte Carlo, always measured: it normalises the errors.
+    Noisy,
+    G,
+    P,
+    Both,
+    Guided,
+    GuidedHalf,
+    FixNTrain,
+    FullNFull,
+    RadianceOnly,
+    /// Intel Open Image Denoise, the baseline.
+    Oidn,
+}
+
+impl EvalMethod {
+    pub const ALL: [EvalMethod; 10] = [
+        EvalMethod::Noisy,
+        EvalMethod::G,
+        EvalMethod::P,
+        EvalMethod::Both,
+        EvalMethod::Guided,
+        EvalMethod::GuidedHalf,
+        EvalMethod::FixNTrain,
+        EvalMethod::FullNFull,
+        EvalMethod::RadianceOnly,
+        EvalMethod::Oidn,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            EvalMethod::Noisy => "noisy",
+            EvalMethod::G => "g",
+            EvalMethod::P => "p",
+            EvalMethod::Both => "both",
+            EvalMethod::Guided => "guided",
+            EvalMethod::GuidedHalf => "guided-half",
+            EvalMethod::FixNTrain => "fix-n-train",
+            EvalMethod::FullNFull => "full-n-full",
+            EvalMethod::RadianceOnly => "radiance-only",
+            EvalMethod::Oidn => "oidn",
+        }
+    }
+
+    /// Label in tables and plots.
+    pub fn label(self) -> &'static str {
+        match self {
+            EvalMethod::Noisy => "noisy (MC)",
+            EvalMethod::G => "D_G (g)",
+            EvalMethod::P => "D_P (p)",
+            EvalMethod::Both => "both-buffers",
+            EvalMethod::Guided => "guided",
+            EvalMethod::GuidedHalf => "guided (half)",
+            EvalMethod::FixNTrain => "Fix-N-Train",
+            EvalMethod::FullNFull => "Full-N-Full",
+            EvalMethod::RadianceOnly => "E radiances only",
+            EvalMethod::Oidn => "OIDN",
+        }
+    }
+
+    /// The model a learned method loads: its method, ablation and preset, which name its weight
+    /// file ([`weights::file_stem`], the names `pixguide train --all` writes).
+    pub fn model(self) -> Option<(Method, Option<Ablation>, Preset)> {
+        match self {
+            EvalMethod::Noisy | EvalMethod::Oidn => None,
+            EvalMethod::G => Some((Method::G, None, Preset::Default)),
+            EvalMethod::P => Some((Method::P, None, Preset::Default)),
+            EvalMethod::Both => Some((Method::Both, None, Preset::Default)),
+            EvalMethod::Guided => Some((Method::Guided, None, Preset::Default)),
+            EvalMethod::GuidedHalf => Some((Method::Guided, None, Preset::Half)),
+            EvalMethod::FixNTrain => Some((Method::Guided, Some(Ablation::FixNTrain), Preset::Default)),
+            EvalMethod::FullNFull => Some((Method::Guided, Some(Ablation::FullNFull), Preset::Default)),
+            EvalMethod::RadianceOnly => Some((Method::Guided, Some(Ablation::RadianceOnly), Preset::Default)),
+        }
+    }
+}
+
+impl std::fmt::Display for EvalMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl clap::ValueEnum for EvalMethod {
+    fn value_variants<'a>() -> &'a [Self] {
+        &EvalMethod::ALL
+    }
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.name()))
+    }
+}
 
 /// Methods shown in the pictures, in order.
-pub const PICTURE_METHODS: [&str; 6] = ["noisy", "g", "p", "both", "guided", "oidn"];
-
-/// Label of the OIDN baseline in tables and plots.
-pub const OIDN_LABEL: &str = "OIDN";
+pub const PICTURE_METHODS: [EvalMethod; 6] =
+    [EvalMethod::Noisy, EvalMethod::G, EvalMethod::P, EvalMethod::Both, EvalMethod::Guided, EvalMethod::Oidn];
 
 /// Methods of the runtime breakdown, in its row order per spp.
-pub const BREAKDOWN_METHODS: [&str; 2] = ["guided", "oidn"];
+pub const BREAKDOWN_METHODS: [EvalMethod; 2] = [EvalMethod::Guided, EvalMethod::Oidn];
 
 /// One evaluated method.
 pub struct MethodSpec {
-    pub name: String,
-    pub label: String,
+    pub kind: EvalMethod,
     /// Weight file (None for noisy and OIDN).
     pub file: Option<PathBuf>,
     /// Identity of the weights (size and FNV-1a hash of the file), "mc" for noisy, OIDN's
@@ -47,6 +129,13 @@ pub struct MethodSpec {
 }
 
 impl MethodSpec {
+    /// The method's name, as the cache keys and the page spell it.
+    pub fn name(&self) -> &'static str {
+        self.kind.name()
+    }
+    pub fn label(&self) -> &'static str {
+        self.kind.label()
+    }
     pub fn available(&self) -> bool {
         self.missing.is_none()
     }
@@ -56,71 +145,42 @@ impl MethodSpec {
 }
 
 pub(super) fn methods(a: &EvalArgs) -> Result<Vec<MethodSpec>> {
-    let mut names: Vec<String> = vec!["noisy".into()];
-    for m in a.methods.iter().map(|s| s.trim()).filter(|s| !s.is_empty()) {
-        if m != "noisy" && m != "oidn" && !KNOWN.iter().any(|k| k.0 == m) {
-            bail!("--methods: unknown method `{m}` (expected noisy, {}, oidn)", KNOWN.map(|k| k.0).join(", "));
-        }
-        if !names.iter().any(|n| n == m) {
-            names.push(m.to_string());
+    let mut kinds = vec![EvalMethod::Noisy];
+    for &m in &a.methods {
+        if !kinds.contains(&m) {
+            kinds.push(m);
         }
     }
     let device = denoiser::cpu_device();
     let mut out = Vec::new();
-    for name in names {
-        if name == "oidn" {
-            let label = OIDN_LABEL.to_string();
+    let spec = |kind| MethodSpec { kind, file: None, id: String::new(), loaded: None, oidn: None, missing: None };
+    for kind in kinds {
+        let Some((expect, ablation, preset)) = kind.model() else {
+            if kind == EvalMethod::Noisy {
+                out.push(MethodSpec { id: "mc".into(), ..spec(kind) });
+                continue;
+            }
             match crate::cli::oidn_setup::load() {
-                Ok((o, _)) => out.push(MethodSpec {
-                    name,
-                    label,
-                    file: None,
-                    id: crate::cli::oidn_setup::method_id(&o),
-                    loaded: None,
-                    oidn: Some(o),
-                    missing: None,
-                }),
+                Ok((o, _)) => out.push(MethodSpec { id: crate::cli::oidn_setup::method_id(&o), oidn: Some(o), ..spec(kind) }),
                 Err(e) => {
                     // One line, and the run goes on without it: the baseline is optional.
                     eprintln!("eval: leaving out OIDN: {e:#}");
-                    out.push(MethodSpec {
-                        name,
-                        label,
-                        file: None,
-                        id: String::new(),
-                        loaded: None,
-                        oidn: None,
-                        missing: Some(format!("{e:#}")),
-                    });
+                    out.push(MethodSpec { missing: Some(format!("{e:#}")), ..spec(kind) });
                 }
             }
             continue;
-        }
-        let Some(&(_, stem, label)) = KNOWN.iter().find(|k| k.0 == name) else {
-            out.push(MethodSpec { name, label: "noisy (MC)".into(), file: None, id: "mc".into(), loaded: None, oidn: None, missing: None });
-            continue;
         };
-        let file = a.weights_dir.join(format!("{stem}.safetensors"));
+        let file = a.weights_dir.join(format!("{}.safetensors", weights::file_stem(expect, ablation, preset)));
         if !file.exists() {
-            let missing = Some(format!("no {}", file.display()));
-            out.push(MethodSpec {
-                name: name.clone(),
-                label: label.into(),
-                file: Some(file),
-                id: String::new(),
-                loaded: None,
-                oidn: None,
-                missing,
-            });
+            out.push(MethodSpec { missing: Some(format!("no {}", file.display())), file: Some(file), ..spec(kind) });
             continue;
         }
-        let loaded = weights::load(&file, &device).with_context(|| format!("loading the {name} weights"))?;
-        let expect = Method::parse(&name).unwrap_or(Method::Guided);
+        let loaded = weights::load(&file, &device).with_context(|| format!("loading the {kind} weights"))?;
         if loaded.method != expect {
-            bail!("{} holds weights of the {} model, but `{name}` needs {expect} weights", file.display(), loaded.method);
+            bail!("{} holds weights of the {} model, but `{kind}` needs {expect} weights", file.display(), loaded.method);
         }
         let id = file_id(&file)?;
-        out.push(MethodSpec { name, label: label.into(), file: Some(file), id, loaded: Some(loaded), oidn: None, missing: None });
+        out.push(MethodSpec { id, loaded: Some(loaded), file: Some(file), ..spec(kind) });
     }
     Ok(out)
 }

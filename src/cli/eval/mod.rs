@@ -21,7 +21,7 @@ use clap::Args;
 use denoiser::infer::{self, Denoised};
 use denoiser::metrics;
 use denoiser::preprocess::{self, PreparedImage};
-use methods::{MethodSpec, BREAKDOWN_METHODS, PICTURE_METHODS};
+use methods::{EvalMethod, MethodSpec, BREAKDOWN_METHODS, PICTURE_METHODS};
 use renderer::film::Frame;
 use renderer::scene::Scene;
 use scenes::{load_scene, render, TestScene};
@@ -42,8 +42,13 @@ pub struct EvalArgs {
     /// guided, guided-half, fix-n-train, full-n-full, radiance-only, oidn (Intel Open Image
     /// Denoise, the baseline: installed into target/oidn-venv from PyPI the first time, and left
     /// out with one line saying why if that fails).
-    #[arg(long, default_value = "noisy,g,p,both,guided,guided-half,fix-n-train,full-n-full,radiance-only,oidn", value_delimiter = ',')]
-    pub methods: Vec<String>,
+    #[arg(
+        long,
+        value_enum,
+        default_value = "noisy,g,p,both,guided,guided-half,fix-n-train,full-n-full,radiance-only,oidn",
+        value_delimiter = ','
+    )]
+    pub methods: Vec<EvalMethod>,
     /// Folder of the weight files (`<method>-default.safetensors`, `guided-half.safetensors`, …:
     /// the names `pixguide train --all` writes).
     #[arg(long, default_value = "denoiser/weights")]
@@ -93,8 +98,8 @@ pub struct PictureData {
     pub width: usize,
     pub height: usize,
     pub reference: Vec<f32>,
-    /// (method name, label, radiance, relMSE).
-    pub images: Vec<(String, String, Vec<f32>, f64)>,
+    /// (method, radiance, relMSE).
+    pub images: Vec<(EvalMethod, Vec<f32>, f64)>,
     pub weights_g: Option<denoiser::infer::BranchMaps>,
 }
 
@@ -115,7 +120,7 @@ pub struct Outcome {
 
 impl Outcome {
     pub fn quality(&self, scene: &str, spp: u32, m: &MethodSpec, seed: u64, s: &TestScene) -> Option<&Record> {
-        self.records.get(&key("quality", scene, &s.reference_id, spp, &m.name, &m.id, seed, s.width, s.height))
+        self.records.get(&key("quality", scene, &s.reference_id, spp, m.name(), &m.id, seed, s.width, s.height))
     }
 }
 
@@ -190,13 +195,13 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 .iter()
                 .copied()
                 .filter(|&i| {
-                    let n = methods[i].name.as_str();
-                    n == "noisy" || in_table || (picture && PICTURE_METHODS.contains(&n))
+                    let k = methods[i].kind;
+                    k == EvalMethod::Noisy || in_table || (picture && PICTURE_METHODS.contains(&k))
                 })
                 .collect();
             let uncached = |i: usize| {
                 cache
-                    .get(&key("quality", &s.name, &s.reference_id, spp, &methods[i].name, &methods[i].id, a.seed, s.width, s.height))
+                    .get(&key("quality", &s.name, &s.reference_id, spp, methods[i].name(), &methods[i].id, a.seed, s.width, s.height))
                     .is_none()
             };
             // Pictures are redrawn when a file is missing, or when a picture method is measured
@@ -204,14 +209,14 @@ pub fn run(a: EvalArgs) -> Result<()> {
             // otherwise be stale or absent.
             let redraw = picture
                 && (picture_paths(&dir, &s.name, spp).iter().any(|p| !p.exists())
-                    || wanted.iter().any(|&i| PICTURE_METHODS.contains(&methods[i].name.as_str()) && uncached(i)));
+                    || wanted.iter().any(|&i| PICTURE_METHODS.contains(&methods[i].kind) && uncached(i)));
             let todo: Vec<usize> = wanted
                 .iter()
                 .copied()
                 .filter(|&i| {
                     // Pictures need the images, which the cache does not keep: every picture
                     // method is measured again for a redraw.
-                    (redraw && PICTURE_METHODS.contains(&methods[i].name.as_str())) || uncached(i)
+                    (redraw && PICTURE_METHODS.contains(&methods[i].kind)) || uncached(i)
                 })
                 .collect();
             cached += wanted.len() - todo.len();
@@ -225,14 +230,14 @@ pub fn run(a: EvalArgs) -> Result<()> {
     // The breakdown: (method, spp) of guided and of the OIDN baseline.
     let mut breakdown_todo = Vec::new();
     if a.breakdown_size > 0 {
-        for g in (0..methods.len()).filter(|&i| BREAKDOWN_METHODS.contains(&methods[i].name.as_str()) && methods[i].available()) {
+        for g in (0..methods.len()).filter(|&i| BREAKDOWN_METHODS.contains(&methods[i].kind) && methods[i].available()) {
             for &spp in &a.spp {
                 let k = key(
                     "breakdown",
                     &breakdown_scene,
                     "",
                     spp,
-                    &methods[g].name,
+                    methods[g].name(),
                     &methods[g].id,
                     a.seed,
                     a.breakdown_size,
@@ -314,7 +319,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 scene: s.name.clone(),
                 reference: s.reference_id.clone(),
                 spp: job.spp,
-                method: m.name.clone(),
+                method: m.name().to_string(),
                 weights: m.id.clone(),
                 seed: a.seed,
                 width: s.width,
@@ -339,7 +344,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 (None, Some(l)) => {
                     let td = Instant::now();
                     let d: Denoised = infer::denoise(&l.model, &l.config, prepared, &frame.radiance.mean, &opts, &device)
-                        .with_context(|| format!("denoising {} at {} spp with {}", s.name, job.spp, m.name))?;
+                        .with_context(|| format!("denoising {} at {} spp with {}", s.name, job.spp, m.name()))?;
                     r.denoise_s = td.elapsed().as_secs_f64();
                     r.prepare_s = *prepare_s;
                     r.time_s = render_s + prepare_s + r.denoise_s;
@@ -356,12 +361,17 @@ pub fn run(a: EvalArgs) -> Result<()> {
             load_samples.push(r.load1);
             say(format!(
                 "{} {:>2} spp {:<14} relMSE {:.5}  1-SSIM {:.5}  {:.2} s",
-                s.name, job.spp, m.name, r.rel_mse, r.one_minus_ssim, r.time_s
+                s.name,
+                job.spp,
+                m.name(),
+                r.rel_mse,
+                r.one_minus_ssim,
+                r.time_s
             ));
             if let Some(p) = picture.as_mut() {
-                if PICTURE_METHODS.contains(&m.name.as_str()) {
-                    p.images.push((m.name.clone(), m.label.clone(), image, r.rel_mse));
-                    if m.name == "guided" {
+                if PICTURE_METHODS.contains(&m.kind) {
+                    p.images.push((m.kind, image, r.rel_mse));
+                    if m.kind == EvalMethod::Guided {
                         p.weights_g = wg;
                     }
                 }
@@ -381,14 +391,14 @@ pub fn run(a: EvalArgs) -> Result<()> {
         let scene = load_scene(s, size, size)?;
         for &(g, spp) in &breakdown_todo {
             let m = &methods[g];
-            pb.set_message(format!("breakdown {} {spp} spp", m.name));
+            pb.set_message(format!("breakdown {} {spp} spp", m.name()));
             let (mut frame, render_s) = render(&scene, spp, a.seed, m.needs_descriptors())?;
             renders += 1;
             let mut r = Record {
                 kind: "breakdown".into(),
                 scene: s.name.clone(),
                 spp,
-                method: m.name.clone(),
+                method: m.name().to_string(),
                 weights: m.id.clone(),
                 seed: a.seed,
                 width: size,

@@ -1,7 +1,7 @@
 //! The picture sheets of `pixguide eval` (images, error maps, W_G maps of one scene and spp), each
 //! with a zoom on the window where the denoised images are worst.
 
-use super::methods::PICTURE_METHODS;
+use super::methods::{EvalMethod, PICTURE_METHODS};
 use super::{picture_paths, PictureData};
 use crate::cli::font;
 use anyhow::{Context, Result};
@@ -171,17 +171,17 @@ pub fn write_pictures(dir: &Path, p: &PictureData) -> Result<()> {
     let [images_png, errors_png, weights_png] = picture_paths(dir, &p.scene, p.spp);
     let (w, h) = (p.width, p.height);
     let tile = (w as u32, h as u32);
-    let mut ordered: Vec<&(String, String, Vec<f32>, f64)> = Vec::new();
+    let mut ordered: Vec<&(EvalMethod, Vec<f32>, f64)> = Vec::new();
     for name in PICTURE_METHODS {
         ordered.extend(p.images.iter().filter(|i| i.0 == name));
     }
     let reference = tonemapped(&p.reference);
-    let toned: Vec<Vec<[f64; 3]>> = ordered.iter().map(|i| tonemapped(&i.2)).collect();
+    let toned: Vec<Vec<[f64; 3]>> = ordered.iter().map(|i| tonemapped(&i.1)).collect();
     let errors: Vec<Vec<f64>> = toned.iter().map(|t| error_map(t, &reference)).collect();
     // The zoom goes where the denoised images differ most visibly from the reference: squared
     // error of the displayed (tone-mapped) colours, which unlike relMSE does not single out the
     // darkest corner.
-    let shown: Vec<&Vec<[f64; 3]>> = ordered.iter().zip(&toned).filter(|(i, _)| i.0 != "noisy").map(|(_, t)| t).collect();
+    let shown: Vec<&Vec<[f64; 3]>> = ordered.iter().zip(&toned).filter(|(i, _)| i.0 != EvalMethod::Noisy).map(|(_, t)| t).collect();
     let score: Vec<f64> =
         (0..w * h).map(|i| shown.iter().map(|t| (0..3).map(|c| (t[i][c] - reference[i][c]).powi(2)).sum::<f64>()).sum()).collect();
     let win = hardest_window(&score, w, h);
@@ -197,19 +197,19 @@ pub fn write_pictures(dir: &Path, p: &PictureData) -> Result<()> {
     };
 
     let mut sheet = Sheet::new(ordered.len() + 1, 2, tile);
-    for (k, ((_, label, _, rel), t)) in ordered.iter().zip(&toned).enumerate() {
-        both_rows(&mut sheet, k, to8(t), label, &format!("{rel:.4}"), &format!("{:.4}", window_mean(&errors[k], w, win)));
+    for (k, ((method, _, rel), t)) in ordered.iter().zip(&toned).enumerate() {
+        both_rows(&mut sheet, k, to8(t), method.label(), &format!("{rel:.4}"), &format!("{:.4}", window_mean(&errors[k], w, win)));
     }
     both_rows(&mut sheet, ordered.len(), to8(&reference), "reference", "8000 spp", "");
     sheet.save(&images_png)?;
 
     let mut sheet = Sheet::new(ordered.len() + 1, 2, tile);
-    for (k, (_, label, _, rel)) in ordered.iter().enumerate() {
+    for (k, (method, _, rel)) in ordered.iter().enumerate() {
         both_rows(
             &mut sheet,
             k,
             mapped(&errors[k], &inferno_log),
-            label,
+            method.label(),
             &format!("relMSE {rel:.4}"),
             &format!("{:.4}", window_mean(&errors[k], w, win)),
         );

@@ -2,7 +2,7 @@
 //! shows are drawn by pictures.rs.
 
 use super::cache::Record;
-use super::methods::{MethodSpec, BREAKDOWN_METHODS};
+use super::methods::{EvalMethod, MethodSpec, BREAKDOWN_METHODS};
 use super::pictures::ZOOM;
 use super::scenes::TestScene;
 use super::{picture_paths, picture_scenes, EvalArgs, Outcome, NORM_SPP};
@@ -158,9 +158,9 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
     )?;
     writeln!(w, "| method | weights | status |\n|---|---|---|")?;
     for m in &o.methods {
-        let file = match (&m.file, m.name.as_str()) {
+        let file = match (&m.file, m.kind) {
             (Some(p), _) => format!("`{}`", p.display()),
-            (None, "oidn") => "its own, built into the library".into(),
+            (None, EvalMethod::Oidn) => "its own, built into the library".into(),
             (None, _) => "–".into(),
         };
         let status = match (&m.missing, &m.loaded, &m.oidn) {
@@ -175,7 +175,7 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
             (None, None, Some(o)) => crate::cli::oidn_setup::describe(o),
             (None, None, None) => "plain Monte Carlo, no denoising".into(),
         };
-        writeln!(w, "| {} | {file} | {status} |", m.label)?;
+        writeln!(w, "| {} | {file} | {status} |", m.label())?;
     }
 
     writeln!(w, "\n## Quality, mean over the {} scenes (the paper's Table 2 layout)\n", o.scenes.len())?;
@@ -195,10 +195,10 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
         header(w)?;
         for m in &o.methods {
             if let Some(why) = &m.missing {
-                writeln!(w, "| {} | not available ({why}) |", m.label)?;
+                writeln!(w, "| {} | not available ({why}) |", m.label())?;
                 continue;
             }
-            write!(w, "| {} |", m.label)?;
+            write!(w, "| {} |", m.label())?;
             for &spp in &spps {
                 for metric in [Metric::RelMse, Metric::Ssim] {
                     let (raw, norm) = v.means(spp, m, metric);
@@ -215,7 +215,7 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
             .iter()
             .enumerate()
             .map(|(k, m)| Curve {
-                label: m.label.clone(),
+                label: m.label().to_string(),
                 colour: k,
                 points: spps
                     .iter()
@@ -254,7 +254,7 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
     }
     writeln!(w, "\n|---|{}", "---|".repeat(spps.len()))?;
     for m in &avail {
-        write!(w, "| {} |", m.label)?;
+        write!(w, "| {} |", m.label())?;
         for &spp in &spps {
             write!(w, " {} |", f(v.mean_time(spp, m), 2))?;
         }
@@ -263,12 +263,12 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
 
     // Breakdown.
     writeln!(w, "\n## Runtime breakdown (the paper's Table 1)\n")?;
-    let asked: Vec<&MethodSpec> = BREAKDOWN_METHODS.iter().filter_map(|n| o.methods.iter().find(|m| m.name == *n)).collect();
+    let asked: Vec<&MethodSpec> = BREAKDOWN_METHODS.iter().filter_map(|n| o.methods.iter().find(|m| m.kind == *n)).collect();
     if a.breakdown_size == 0 || asked.is_empty() {
         writeln!(w, "Not measured (`--breakdown-size 0`, or neither guided nor oidn among `--methods`).")?;
     }
     for m in asked.iter().filter(|m| a.breakdown_size > 0 && !m.available()) {
-        writeln!(w, "{}: not available ({}).\n", m.label, m.missing.clone().unwrap_or_default())?;
+        writeln!(w, "{}: not available ({}).\n", m.label(), m.missing.clone().unwrap_or_default())?;
     }
     let shown: Vec<&&MethodSpec> = asked.iter().filter(|m| a.breakdown_size > 0 && m.available()).collect();
     if !shown.is_empty() {
@@ -278,7 +278,7 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
             "Wall seconds on {1} rendered at {size}×{size}, for {0}. The guided model renders with descriptors; D_P includes the path-manifold modules; \
              E + blend includes recombining the two branches; tiling = cutting windows out of the prepared image and reading results back; columns \
              of the two branches (diffuse, specular) are summed. OIDN renders without descriptors; its filter = OIDN's RT filter, commit + execute.\n",
-            shown.iter().map(|m| m.label.as_str()).collect::<Vec<_>>().join(" and "),
+            shown.iter().map(|m| m.label()).collect::<Vec<_>>().join(" and "),
             o.breakdown_scene
         )?;
         writeln!(w, "| spp | method | render | preprocessing | D_G | D_P (with path module) | E + blend | tiling | OIDN filter | total |\n|---|---|---|---|---|---|---|---|---|---|")?;
@@ -286,7 +286,7 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
             for m in &shown {
                 let found = o.records.values().find(|r| {
                     r.kind == "breakdown"
-                        && r.method == m.name
+                        && r.method == m.name()
                         && r.scene == o.breakdown_scene
                         && r.spp == spp
                         && r.weights == m.id
@@ -296,12 +296,19 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
                 });
                 let Some(r) = found else { continue };
                 if m.oidn.is_some() {
-                    writeln!(w, "| {spp} | {} | {:.2} | – | – | – | – | – | {:.2} | {:.2} |", m.label, r.render_s, r.denoise_s, r.time_s)?;
+                    writeln!(
+                        w,
+                        "| {spp} | {} | {:.2} | – | – | – | – | – | {:.2} | {:.2} |",
+                        m.label(),
+                        r.render_s,
+                        r.denoise_s,
+                        r.time_s
+                    )?;
                 } else {
                     writeln!(
                         w,
                         "| {spp} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | – | {:.2} |",
-                        m.label,
+                        m.label(),
                         r.render_s,
                         r.prepare_s,
                         r.d_g_s,
@@ -327,7 +334,7 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
             writeln!(w, "{spp} spp\n")?;
             write!(w, "| scene |")?;
             for m in &avail {
-                write!(w, " {} |", m.label)?;
+                write!(w, " {} |", m.label())?;
             }
             writeln!(w, "\n|---|{}", "---|".repeat(avail.len()))?;
             for sc in &o.scenes {
