@@ -41,18 +41,16 @@ fn tensors(path: &Path) -> Vec<(String, Vec<u8>)> {
     out
 }
 
-#[test]
-fn train_g_p_guided_and_resume() {
-    let base = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("train");
-    std::fs::remove_dir_all(&base).ok();
-    let data = base.join("data");
-    let d = data.to_str().unwrap();
+/// A tiny dataset of the shipped Cornell box in `dir`: `shots` training shots of 32² (and the
+/// validation shot), 2 and 4 spp, 8-spp references.
+fn cornell_dataset(dir: &str, shots: u32) {
+    let shots = shots.to_string();
     pixguide(&[
         "dataset",
         "--scenes",
         "scenes/cornell-box/scene.toml",
         "--shots",
-        "2",
+        &shots,
         "--spp",
         "2,4",
         "--ref-spp",
@@ -61,8 +59,17 @@ fn train_g_p_guided_and_resume() {
         "32x32",
         "--quiet",
         "-o",
-        d,
+        dir,
     ]);
+}
+
+#[test]
+fn train_g_p_guided_and_resume() {
+    let base = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("train");
+    std::fs::remove_dir_all(&base).ok();
+    let data = base.join("data");
+    let d = data.to_str().unwrap();
+    cornell_dataset(d, 2);
     let out = |n: &str| base.join(n).to_str().unwrap().to_string();
     let common = [
         "--data",
@@ -266,22 +273,7 @@ fn calibrate_writes_the_kept_exponent_and_nothing_else() {
     std::fs::remove_dir_all(&base).ok();
     let data = base.join("data");
     let d = data.to_str().unwrap();
-    pixguide(&[
-        "dataset",
-        "--scenes",
-        "scenes/cornell-box/scene.toml",
-        "--shots",
-        "0",
-        "--spp",
-        "2,4",
-        "--ref-spp",
-        "8",
-        "--size",
-        "32x32",
-        "--quiet",
-        "-o",
-        d,
-    ]);
+    cornell_dataset(d, 0);
     let input = "denoiser/weights/edge-noise/g-default.safetensors";
     let out = base.join("g.safetensors");
     let stdout =

@@ -23,7 +23,7 @@ use denoiser::model::{BranchInput, DenoiserConfig, Preset};
 use denoiser::preprocess::{InputTensors, TargetTensors};
 use denoiser::rng::SplitMix64;
 use denoiser::train::checkpoint::parameters;
-use denoiser::train::schedule::{LossScale, LrShape, Stage, StageKind};
+use denoiser::train::schedule::{Stage, StageKind};
 use denoiser::train::stage_loss;
 use denoiser::weights::{self, Provenance};
 use denoiser::Backend;
@@ -47,6 +47,7 @@ fn train(cfg: &DenoiserConfig, method: Method, steps: usize, b: usize, size: usi
         colour: random(&mut data, [b, 10, size, size], d),
         g_block: random(&mut data, [b, 24, size, size], d),
         descriptors: random(&mut data, [b, spp, 36, size, size], d),
+        spp,
     };
     let (diffuse, specular) = (input(&device), input(&device));
     let inputs = InputTensors { diffuse, specular, path_weight: Tensor::zeros([b, 1, size, size], &device) };
@@ -54,15 +55,7 @@ fn train(cfg: &DenoiserConfig, method: Method, steps: usize, b: usize, size: usi
     let t_spec = random(&mut data, [b, 3, o, o], &device);
     // The first stage's loss (per-branch L1, + 0.1·L_path where the method has PathNets), as training computes it.
     let targets = TargetTensors { total: t_diff.clone() + t_spec.clone(), diffuse: t_diff, specular: t_spec };
-    let stage = Stage {
-        kind: StageKind::Branches,
-        steps: 1,
-        lr_rest: None,
-        lr_e: None,
-        w_path: 0.1,
-        shape: LrShape::Constant,
-        loss_scale: LossScale::Absolute,
-    };
+    let stage = Stage::constant(StageKind::Branches, 1, None, None, 0.1);
     let mut optim = AdamConfig::new().with_epsilon(1e-8).with_grad_clipping(Some(GradientClippingConfig::Value(1.0))).init();
     let mut rng = SplitMix64::new(1);
     for step in 0..steps {

@@ -10,7 +10,7 @@ use denoiser::method::{Method, MethodModel};
 use denoiser::model::Preset;
 use denoiser::train::data::{batch_tensors, Dataset, LoadOptions};
 use denoiser::train::patches::Sampling;
-use denoiser::train::schedule::{LossScale, LrShape, Stage, StageKind};
+use denoiser::train::schedule::{Stage, StageKind};
 use denoiser::train::{draw_batch, optimizer, train_step, TrainOptions};
 
 fn main() {
@@ -21,15 +21,7 @@ fn main() {
     let load = LoadOptions { spps: vec![], descriptors: true, patch, sampling: Sampling::Importance, max_train: None };
     let data = Dataset::load(std::path::Path::new(data_dir), &load, &mut |_, _| {}).unwrap();
     let dev = denoiser::cpu_training_device();
-    let stage = |kind, rest: Option<f64>, e: Option<f64>, w| Stage {
-        kind,
-        steps: 1,
-        lr_rest: rest,
-        lr_e: e,
-        w_path: w,
-        shape: LrShape::Constant,
-        loss_scale: LossScale::Absolute,
-    };
+    let stage = |kind, rest: Option<f64>, e: Option<f64>, w| Stage::constant(kind, 1, rest, e, w);
     let variants: Vec<(&str, Preset, Method, Stage, bool)> = vec![
         ("g branches", Preset::Default, Method::G, stage(StageKind::Branches, Some(1e-4), None, 0.0), false),
         ("g finetune", Preset::Default, Method::G, stage(StageKind::Finetune, Some(1e-6), None, 0.0), false),

@@ -22,7 +22,7 @@ use denoiser::method::{Method, MethodModel, Part};
 use denoiser::model::{BranchInput, DenoiserConfig, Preset};
 use denoiser::preprocess::{InputTensors, TargetTensors};
 use denoiser::rng::SplitMix64;
-use denoiser::train::schedule::{LossScale, LrShape, Stage, StageKind};
+use denoiser::train::schedule::{Stage, StageKind};
 use denoiser::train::stage_loss;
 use denoiser::Backend;
 
@@ -113,15 +113,7 @@ fn main() {
     let t_spec = Tensor::<4>::random([b, 3, o, o], u, &device);
     // The first stage's loss (per-branch L1, + 0.1·L_path where the method has PathNets), as training computes it.
     let targets = TargetTensors { total: t_diff.clone() + t_spec.clone(), diffuse: t_diff, specular: t_spec };
-    let stage = Stage {
-        kind: StageKind::Branches,
-        steps: 1,
-        lr_rest: None,
-        lr_e: None,
-        w_path: 0.1,
-        shape: LrShape::Constant,
-        loss_scale: LossScale::Absolute,
-    };
+    let stage = Stage::constant(StageKind::Branches, 1, None, None, 0.1);
     let mut optim = AdamConfig::new().with_epsilon(1e-8).with_grad_clipping(Some(GradientClippingConfig::Value(1.0))).init();
     let mut rng = SplitMix64::new(1);
     let mut times = Vec::new();

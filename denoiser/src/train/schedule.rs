@@ -63,6 +63,12 @@ pub enum LrShape {
 }
 
 impl Stage {
+    /// A stage at constant rates with the paper's plain L1: what benchmarks, examples and
+    /// tests of a single step use.
+    pub fn constant(kind: StageKind, steps: usize, lr_rest: Option<f64>, lr_e: Option<f64>, w_path: f64) -> Self {
+        Stage { kind, steps, lr_rest, lr_e, w_path, shape: LrShape::Constant, loss_scale: LossScale::Absolute }
+    }
+
     /// Multiplier of the stage's rates at 0-based `step`.
     pub fn lr_factor(&self, step: usize) -> f64 {
         match self.shape {

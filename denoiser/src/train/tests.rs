@@ -9,8 +9,8 @@ use data::Shot;
 use film::descriptors::{field, FIELDS};
 use film::{Descriptors, Frame, PixelBuffer};
 use patches::PatchSampler;
+use schedule::LossScale;
 use schedule::ScheduleOptions;
-use schedule::{LossScale, LrShape};
 
 fn tiny() -> DenoiserConfig {
     DenoiserConfig::new(
@@ -139,8 +139,7 @@ fn fit_fixed_batch(method: Method, w_path: f64, loss_scale: LossScale) -> Vec<f3
     let o = options(method, None, &short());
     let dev = crate::cpu_training_device();
     let mut model = initial_model(&o, None, None, &dev).unwrap();
-    let stage =
-        Stage { kind: StageKind::Branches, steps: 30, lr_rest: Some(1e-3), lr_e: None, w_path, shape: LrShape::Constant, loss_scale };
+    let stage = Stage { loss_scale, ..Stage::constant(StageKind::Branches, 30, Some(1e-3), None, w_path) };
     let (refs, _) = draw_batch(&data, &o, 0, 0);
     let mut optim = optimizer();
     let mut losses = Vec::new();
