@@ -22,23 +22,31 @@ pub enum LossScale {
     /// about half as much as a 2-spp one (the absolute L1: a quarter), so the low sample counts
     /// keep more of the gradient than under the fully relative loss.
     RelativeToSqrtInput,
+    /// Not an L1: the squared error of each pixel weighed by 1/(its output² + 0.01), the output
+    /// without gradient ([`rel_l2`]; the relMSE loss of Noise2Noise, Lehtinen et al. 2018). Its
+    /// optimum is the conditional mean of the target, where L1's is the median: on a sparse
+    /// input, whose lit pixels are rare, the median is darker than the mean.
+    RelativeL2,
 }
 
 impl LossScale {
-    pub const ALL: [LossScale; 3] = [LossScale::Absolute, LossScale::RelativeToInput, LossScale::RelativeToSqrtInput];
+    pub const ALL: [LossScale; 4] =
+        [LossScale::Absolute, LossScale::RelativeToInput, LossScale::RelativeToSqrtInput, LossScale::RelativeL2];
 
     pub fn name(self) -> &'static str {
         match self {
             LossScale::Absolute => "absolute",
             LossScale::RelativeToInput => "relative-to-input",
             LossScale::RelativeToSqrtInput => "relative-to-sqrt-input",
+            LossScale::RelativeL2 => "relative-l2",
         }
     }
 
-    /// The power of the input's error that divides a patch's L1, or `None` for the absolute L1.
+    /// The power of the input's error that divides a patch's L1, or `None` for the losses that
+    /// do not look at the input.
     pub fn input_power(self) -> Option<f32> {
         match self {
-            LossScale::Absolute => None,
+            LossScale::Absolute | LossScale::RelativeL2 => None,
             LossScale::RelativeToInput => Some(1.0),
             LossScale::RelativeToSqrtInput => Some(0.5),
         }
@@ -80,6 +88,16 @@ pub fn l1_relative_to_input(branches: &[(Tensor<4>, Tensor<4>, Tensor<4>)], powe
     let denominator = l1_per_patch(&noisy).add_scalar(RELATIVE_L1_EPS);
     let denominator = if power == 1.0 { denominator } else { denominator.powf_scalar(power) };
     (l1_per_patch(&out) / denominator).mean()
+}
+
+/// ε of [`rel_l2`]'s denominator, in branch units: Noise2Noise's 0.01.
+pub const REL_L2_EPS: f32 = 0.01;
+
+/// mean over elements of (x − y)² / (x̂² + [`REL_L2_EPS`]), x̂ = x without gradient.
+pub fn rel_l2(x: Tensor<4>, y: Tensor<4>) -> Tensor<1> {
+    let d = x.clone() - y;
+    let x_hat = x.detach();
+    (d.clone() * d / (x_hat.clone() * x_hat).add_scalar(REL_L2_EPS)).mean()
 }
 
 /// Mean absolute error over all elements.
@@ -237,6 +255,27 @@ mod tests {
         let sqrt = scalar(l1_relative_to_input(&[(halved, noisy, target)], 0.5));
         let want = (0.5 / (1.0f64 + 1e-3).sqrt() + 0.05 / (0.1f64 + 1e-3).sqrt()) / 2.0;
         assert!((sqrt - want).abs() < 1e-5, "halved under the square root scores {sqrt}, want {want}");
+    }
+
+    /// rel_l2's value is (x − y)²/(x² + 0.01) averaged, and its gradient is that of the squared
+    /// error over a constant denominator: 2(x − y)/(x² + 0.01)/n, so a prediction of 0.25 for
+    /// targets 0, 0, 0 and 1 (their mean) has gradient 0 in sum, where L1's sum is 2/n ≠ 0
+    /// (its optimum is the median, 0).
+    #[test]
+    fn rel_l2_optimum_is_the_mean() {
+        let d = crate::cpu_training_device();
+        let y = tensor(&[0.0, 0.0, 0.0, 1.0], [1, 1, 2, 2], &d);
+        let x = tensor(&[0.25; 4], [1, 1, 2, 2], &d).require_grad();
+        let value = scalar(rel_l2(x.clone(), y.clone()));
+        let want = (3.0 * 0.0625 + 0.5625) / 4.0 / (0.0625 + 0.01);
+        assert!((value - want).abs() < 1e-5 * want, "rel_l2 {value}, want {want}");
+        let g = rel_l2(x.clone(), y.clone()).backward();
+        let grad = crate::test_util::grad_of(&x, &g);
+        let sum: f64 = grad.iter().sum();
+        assert!(sum.abs() < 1e-5, "gradient sum at the mean {sum} ({grad:?})");
+        let g1 = l1(x.clone(), y).backward();
+        let sum1: f64 = crate::test_util::grad_of(&x, &g1).iter().sum();
+        assert!((sum1 - 0.5).abs() < 1e-6, "L1 gradient sum at the mean {sum1}");
     }
 
     /// Validation scores what `pixguide eval` scores: the tensor version equals the CPU metric

@@ -106,7 +106,9 @@ pub struct TrainArgs {
     /// How the branch and joint losses weigh each patch: absolute (the paper's L1) or
     /// relative-to-input (each patch's L1 divided by its noisy input's, so every sample count
     /// counts alike) or relative-to-sqrt-input (divided by the square root of it: in between);
-    /// docs/training.md, "Loss relative to the input".
+    /// docs/training.md, "Loss relative to the input". relative-l2: not an L1 but the squared
+    /// error over the output's square + 0.01 (Noise2Noise's relMSE loss; docs/denoiser.md, "A
+    /// relative L2 loss").
     #[arg(long, value_enum, default_value_t = LossScale::Absolute)]
     pub loss_scale: LossScale,
     /// Learning rate of E in the joint stage.

@@ -29,7 +29,7 @@ use burn::module::{Module, ModuleVisitor, ParamId};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor};
 
-use crate::loss::{l1, l1_relative_to_input, l1_tonemapped, path_disentangling_loss, rel_mse_test};
+use crate::loss::{l1, l1_relative_to_input, l1_tonemapped, path_disentangling_loss, rel_l2, rel_mse_test};
 use crate::method::{BranchNets, Method, MethodModel, MethodOutput};
 use crate::model::DenoiserConfig;
 use crate::preprocess::TargetTensors;
@@ -310,6 +310,9 @@ pub fn stage_loss(out: MethodOutput, t: &TargetTensors, stage: &Stage, noisy: Op
                     power,
                 ),
                 (Some(_), None) => panic!("a relative loss scale needs the noisy colour (NoisyColour::for_stage)"),
+                (None, _) if stage.loss_scale == crate::loss::LossScale::RelativeL2 => {
+                    rel_l2(out.diffuse.output, t.diffuse.clone()) + rel_l2(out.specular.output, t.specular.clone())
+                }
                 (None, _) => l1(out.diffuse.output, t.diffuse.clone()) + l1(out.specular.output, t.specular.clone()),
             };
             if stage.w_path > 0.0 {
