@@ -111,6 +111,11 @@ pub struct TrainArgs {
     /// relative L2 loss").
     #[arg(long, value_enum, default_value_t = LossScale::Absolute)]
     pub loss_scale: LossScale,
+    /// Weight of a relative L2 term (Noise2Noise's relMSE loss) added to the branch and joint
+    /// losses of any --loss-scale: it pulls sparse inputs towards the mean, where L1 keeps the
+    /// darker median (docs/denoiser.md, "L1 plus a relative L2 term"). 0 = not computed.
+    #[arg(long, default_value_t = 0.0, value_parser = non_negative)]
+    pub rel_l2_weight: f64,
     /// Learning rate of E in the joint stage.
     #[arg(long)]
     pub lr_joint_e: Option<f64>,
@@ -188,6 +193,7 @@ fn schedule_options(a: &TrainArgs, config: &DenoiserConfig) -> ScheduleOptions {
         o.finetune_loss = l;
     }
     o.loss_scale = a.loss_scale;
+    o.rel_l2_weight = a.rel_l2_weight;
     o.lr_shape = if a.lr_schedule == "constant" { LrShape::Constant } else { LrShape::WarmupCosine { warmup: a.warmup } };
     o
 }
@@ -592,6 +598,15 @@ enum LogLine<'a> {
 fn rounded(v: f64, digits: i32) -> f64 {
     let k = 10f64.powi(digits);
     (v * k).round() / k
+}
+
+/// A finite weight ≥ 0, for the loss-term flags.
+fn non_negative(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(w) if w.is_finite() && w >= 0.0 => Ok(w),
+        Ok(w) => Err(format!("{w} is not a finite weight ≥ 0")),
+        Err(e) => Err(format!("{s:?}: {e}")),
+    }
 }
 
 #[cfg(test)]

@@ -37,7 +37,7 @@ use crate::rng::SplitMix64;
 use augment::Dihedral;
 use checkpoint::{CheckpointPaths, RunState};
 use data::{batch_tensors, Dataset, PatchRef};
-use schedule::{Ablation, Stage, StageKind};
+use schedule::{Ablation, LossScale, Stage, StageKind};
 
 #[derive(Debug, thiserror::Error)]
 pub enum TrainError {
@@ -304,17 +304,18 @@ pub fn stage_loss(out: MethodOutput, t: &TargetTensors, stage: &Stage, noisy: Op
         StageKind::Finetune => l1(out.radiance, t.total.clone()),
         StageKind::FinetuneToneMapped => l1_tonemapped(out.radiance, t.total.clone()),
         StageKind::Branches | StageKind::Joint => {
-            let mut loss = match (stage.loss_scale.input_power(), noisy) {
-                (Some(power), Some(n)) => l1_relative_to_input(
-                    &[(out.diffuse.output, n.diffuse, t.diffuse.clone()), (out.specular.output, n.specular, t.specular.clone())],
-                    power,
-                ),
-                (Some(_), None) => panic!("a relative loss scale needs the noisy colour (NoisyColour::for_stage)"),
-                (None, _) if stage.loss_scale == crate::loss::LossScale::RelativeL2 => {
-                    rel_l2(out.diffuse.output, t.diffuse.clone()) + rel_l2(out.specular.output, t.specular.clone())
+            let (d, s) = (out.diffuse.output, out.specular.output);
+            let mut loss = match (stage.loss_scale, stage.loss_scale.input_power(), noisy) {
+                (LossScale::RelativeL2, ..) => rel_l2(d.clone(), t.diffuse.clone()) + rel_l2(s.clone(), t.specular.clone()),
+                (_, Some(power), Some(n)) => {
+                    l1_relative_to_input(&[(d.clone(), n.diffuse, t.diffuse.clone()), (s.clone(), n.specular, t.specular.clone())], power)
                 }
-                (None, _) => l1(out.diffuse.output, t.diffuse.clone()) + l1(out.specular.output, t.specular.clone()),
+                (_, Some(_), None) => panic!("a relative loss scale needs the noisy colour (NoisyColour::for_stage)"),
+                (_, None, _) => l1(d.clone(), t.diffuse.clone()) + l1(s.clone(), t.specular.clone()),
             };
+            if stage.rel_l2_weight > 0.0 {
+                loss = loss + (rel_l2(d, t.diffuse.clone()) + rel_l2(s, t.specular.clone())).mul_scalar(stage.rel_l2_weight);
+            }
             if stage.w_path > 0.0 {
                 for (p, target) in [(out.diffuse.path, &t.diffuse), (out.specular.path, &t.specular)] {
                     if let Some(p) = p {

@@ -48,6 +48,11 @@ pub struct Stage {
     /// the paper's plain L1.
     #[serde(default)]
     pub loss_scale: LossScale,
+    /// Weight of a relative L2 term ([`crate::loss::rel_l2`]) added to the branch or joint
+    /// loss of any scale (0 = not computed): it pulls sparse inputs towards the conditional mean
+    /// where L1 settles for the darker median. Files and logs without the field mean 0.
+    #[serde(default)]
+    pub rel_l2_weight: f64,
 }
 
 /// How a stage's learning rates vary over its steps.
@@ -66,7 +71,7 @@ impl Stage {
     /// A stage at constant rates with the paper's plain L1: what benchmarks, examples and
     /// tests of a single step use.
     pub fn constant(kind: StageKind, steps: usize, lr_rest: Option<f64>, lr_e: Option<f64>, w_path: f64) -> Self {
-        Stage { kind, steps, lr_rest, lr_e, w_path, shape: LrShape::Constant, loss_scale: LossScale::Absolute }
+        Stage { kind, steps, lr_rest, lr_e, w_path, shape: LrShape::Constant, loss_scale: LossScale::Absolute, rel_l2_weight: 0.0 }
     }
 
     /// Multiplier of the stage's rates at 0-based `step`.
@@ -170,6 +175,9 @@ pub struct ScheduleOptions {
     /// How the branch and joint losses are scaled per patch.
     #[serde(default)]
     pub loss_scale: LossScale,
+    /// Weight of the relative L2 term added to the branch and joint losses ([`Stage::rel_l2_weight`]).
+    #[serde(default)]
+    pub rel_l2_weight: f64,
 }
 
 impl Default for ScheduleOptions {
@@ -189,6 +197,7 @@ impl Default for ScheduleOptions {
             lr_shape: LrShape::WarmupCosine { warmup: 0.05 },
             finetune_loss: FinetuneLoss::Linear,
             loss_scale: LossScale::Absolute,
+            rel_l2_weight: 0.0,
         }
     }
 }
@@ -230,6 +239,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 w_path: o.w_path,
                 shape: o.lr_shape,
                 loss_scale: o.loss_scale,
+                rel_l2_weight: o.rel_l2_weight,
             }]
         }
         (_, Some(Ablation::FixNTrain)) => {
@@ -242,6 +252,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 w_path: 0.0,
                 shape: o.lr_shape,
                 loss_scale: o.loss_scale,
+                rel_l2_weight: o.rel_l2_weight,
             }]
         }
         (_, Some(Ablation::FullNFull)) => {
@@ -253,6 +264,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 w_path: o.w_path,
                 shape: o.lr_shape,
                 loss_scale: o.loss_scale,
+                rel_l2_weight: o.rel_l2_weight,
             }]
         }
         (m, _) => vec![
@@ -264,6 +276,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 w_path: path(m),
                 shape: o.lr_shape,
                 loss_scale: o.loss_scale,
+                rel_l2_weight: o.rel_l2_weight,
             },
             Stage {
                 kind: o.finetune_loss.stage_kind(),
@@ -273,6 +286,8 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 w_path: 0.0,
                 shape: o.lr_shape,
                 loss_scale: o.loss_scale,
+                // The finetune losses are on radiance and take no branch terms.
+                rel_l2_weight: 0.0,
             },
         ],
     }
@@ -298,6 +313,7 @@ mod tests {
             w_path: 0.0,
             shape: LrShape::WarmupCosine { warmup: 0.05 },
             loss_scale: LossScale::Absolute,
+            rel_l2_weight: 0.0,
         };
         assert!((s.lr_factor(0) - 0.1).abs() < 1e-12);
         assert!((s.lr_factor(10) - 1.0).abs() < 1e-12);

@@ -134,12 +134,12 @@ fn train(data: &Dataset, o: &TrainOptions, dir: Option<&Path>, resume: bool) -> 
 }
 
 /// The losses of 30 Adam steps at lr 1e-3 on one fixed batch of a fresh tiny `method` model.
-fn fit_fixed_batch(method: Method, w_path: f64, loss_scale: LossScale) -> Vec<f32> {
+fn fit_fixed_batch(method: Method, w_path: f64, loss_scale: LossScale, rel_l2_weight: f64) -> Vec<f32> {
     let data = dataset();
     let o = options(method, None, &short());
     let dev = crate::cpu_training_device();
     let mut model = initial_model(&o, None, None, &dev).unwrap();
-    let stage = Stage { loss_scale, ..Stage::constant(StageKind::Branches, 30, Some(1e-3), None, w_path) };
+    let stage = Stage { loss_scale, rel_l2_weight, ..Stage::constant(StageKind::Branches, 30, Some(1e-3), None, w_path) };
     let (refs, _) = draw_batch(&data, &o, 0, 0);
     let mut optim = optimizer();
     let mut losses = Vec::new();
@@ -162,7 +162,7 @@ fn fit_fixed_batch(method: Method, w_path: f64, loss_scale: LossScale) -> Vec<f3
 /// output) leaves the ratio ≥ 1.
 #[test]
 fn tiny_model_fits_a_fixed_batch() {
-    let losses = fit_fixed_batch(Method::P, 0.1, LossScale::Absolute);
+    let losses = fit_fixed_batch(Method::P, 0.1, LossScale::Absolute, 0.0);
     let (first, last) = (losses[0], *losses.last().unwrap());
     assert!(last < 0.8 * first, "loss {first} → {last}: {losses:?}");
 }
@@ -172,11 +172,23 @@ fn tiny_model_fits_a_fixed_batch() {
 /// every value is finite (no division by a zero-error patch).
 #[test]
 fn tiny_model_fits_a_fixed_batch_relative_to_its_input() {
-    let losses = fit_fixed_batch(Method::G, 0.0, LossScale::RelativeToInput);
+    let losses = fit_fixed_batch(Method::G, 0.0, LossScale::RelativeToInput, 0.0);
     let (first, last) = (losses[0], *losses.last().unwrap());
     assert!(losses.iter().all(|l| l.is_finite()), "{losses:?}");
     assert!((0.1..10.0).contains(&first), "a fresh model's relative loss is {first}, expected about 1");
     assert!(last < 0.8 * first, "loss {first} → {last}: {losses:?}");
+}
+
+/// The relative L2 term on top of the relative L1: the same fresh model on the same batch starts
+/// higher by exactly the term (positive: a fresh model is not exact), and the mixed loss still
+/// falls well below its start. A term that is never added leaves the first losses equal.
+#[test]
+fn relative_l2_term_adds_to_the_loss_and_still_fits() {
+    let plain = fit_fixed_batch(Method::G, 0.0, LossScale::RelativeToInput, 0.0);
+    let mixed = fit_fixed_batch(Method::G, 0.0, LossScale::RelativeToInput, 5.0);
+    assert!(mixed.iter().all(|l| l.is_finite()), "{mixed:?}");
+    assert!(mixed[0] > plain[0] * 1.01, "with the term {} , without {}", mixed[0], plain[0]);
+    assert!(*mixed.last().unwrap() < 0.8 * mixed[0], "{mixed:?}");
 }
 
 /// Training N steps straight equals N/2, a checkpoint, a fresh process state, and N/2 more —
