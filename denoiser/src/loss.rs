@@ -77,6 +77,13 @@ fn l1_per_patch(pairs: &[(Tensor<4>, Tensor<4>)]) -> Tensor<1> {
 /// k over the branches, with `(out_k, in_k, t_k)` triples of `[B, 3, H, W]` (the noisy input is
 /// cropped to the target). The denominator carries no gradient: it is data.
 pub fn l1_relative_to_input(branches: &[(Tensor<4>, Tensor<4>, Tensor<4>)], power: f32) -> Tensor<1> {
+    relative_to_input(branches, power, 0.0)
+}
+
+/// [`l1_relative_to_input`] with `l2_weight` × each patch's [`rel_l2`] (both branches summed)
+/// added to its L1 before the division: the relative L2 term then weighs every sample count
+/// alike too, instead of being ruled by the 2-spp patches, whose squared errors are the largest.
+pub fn relative_to_input(branches: &[(Tensor<4>, Tensor<4>, Tensor<4>)], power: f32, l2_weight: f32) -> Tensor<1> {
     let out: Vec<_> = branches.iter().map(|(o, _, t)| (o.clone(), t.clone())).collect();
     let noisy: Vec<_> = branches
         .iter()
@@ -87,7 +94,27 @@ pub fn l1_relative_to_input(branches: &[(Tensor<4>, Tensor<4>, Tensor<4>)], powe
         .collect();
     let denominator = l1_per_patch(&noisy).add_scalar(RELATIVE_L1_EPS);
     let denominator = if power == 1.0 { denominator } else { denominator.powf_scalar(power) };
-    (l1_per_patch(&out) / denominator).mean()
+    let mut numerator = l1_per_patch(&out);
+    if l2_weight > 0.0 {
+        numerator = numerator + rel_l2_per_patch(&out).mul_scalar(l2_weight);
+    }
+    (numerator / denominator).mean()
+}
+
+/// Per patch of `[B, 3, H, W]` pairs: Σ_pairs [`rel_l2`] of the patch, shape `[B]`.
+fn rel_l2_per_patch(pairs: &[(Tensor<4>, Tensor<4>)]) -> Tensor<1> {
+    let mut total: Option<Tensor<1>> = None;
+    for (x, y) in pairs {
+        let [b, ..] = x.dims();
+        let d = x.clone() - y.clone();
+        let x_hat = x.clone().detach();
+        let r = (d.clone() * d / (x_hat.clone() * x_hat).add_scalar(REL_L2_EPS)).reshape([b as i32, -1]).mean_dim(1).reshape([b]);
+        total = Some(match total {
+            Some(t) => t + r,
+            None => r,
+        });
+    }
+    total.expect("at least one pair")
 }
 
 /// ε of [`rel_l2`]'s denominator, in branch units: Noise2Noise's 0.01.
@@ -255,6 +282,25 @@ mod tests {
         let sqrt = scalar(l1_relative_to_input(&[(halved, noisy, target)], 0.5));
         let want = (0.5 / (1.0f64 + 1e-3).sqrt() + 0.05 / (0.1f64 + 1e-3).sqrt()) / 2.0;
         assert!((sqrt - want).abs() < 1e-5, "halved under the square root scores {sqrt}, want {want}");
+    }
+
+    /// The relative L2 term inside the relative loss: each patch's L1 plus w × its rel_l2,
+    /// divided by its input's L1, so the term of a patch whose input is 10× closer counts 10×
+    /// as much as it would outside the division. Checked against the two parts computed apart.
+    #[test]
+    fn relative_l2_term_is_divided_by_the_input_error() {
+        let d = crate::cpu_training_device();
+        let (b, c, h, w) = (2usize, 3usize, 2usize, 2usize);
+        let target = tensor(&vec![1.0; b * c * h * w], [b, c, h, w], &d);
+        let noisy = tensor(&(0..b * c * h * w).map(|i| if i < c * h * w { 2.0 } else { 1.1 }).collect::<Vec<_>>(), [b, c, h, w], &d);
+        let out = tensor(&(0..b * c * h * w).map(|i| if i < c * h * w { 1.5 } else { 1.05 }).collect::<Vec<_>>(), [b, c, h, w], &d);
+        let mixed = scalar(relative_to_input(&[(out.clone(), noisy.clone(), target.clone())], 1.0, 4.0));
+        // Patch 0: L1 0.5, rel_l2 0.25/(2.25 + 0.01), input 1.0; patch 1: 0.05, 0.0025/(1.1025 + 0.01), 0.1.
+        let part = |l1: f64, r: f64, e: f64| (l1 + 4.0 * r) / (e + 1e-3);
+        let want = (part(0.5, 0.25 / 2.26, 1.0) + part(0.05, 0.0025 / 1.1125, 0.1)) / 2.0;
+        assert!((mixed - want).abs() < 1e-5 * want, "mixed {mixed}, want {want}");
+        let plain = scalar(relative_to_input(&[(out, noisy, target)], 1.0, 0.0));
+        assert!((plain - (part(0.5, 0.0, 1.0) + part(0.05, 0.0, 0.1)) / 2.0).abs() < 1e-5, "plain {plain}");
     }
 
     /// rel_l2's value is (x − y)²/(x² + 0.01) averaged, and its gradient is that of the squared

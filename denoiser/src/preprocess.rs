@@ -49,9 +49,9 @@ pub struct PreparedImage {
     /// Normalised per-sample descriptors `[S, 36, H, W]`, if the frame had them ([`prepare`]).
     pub descriptors: Option<Vec<f32>>,
     /// Instead of `descriptors` ([`prepare_for_inference`]): the renderer's own per-sample
-    /// records, normalised only when read, so inference never holds a second, planar copy of
-    /// the largest buffer (1.2 GB per copy at 1024², 8 spp).
-    pub records: Option<Descriptors>,
+    /// records, normalised in place, so inference never holds a second, planar copy of the
+    /// largest buffer (1.2 GB per copy at 1024², 8 spp) and only gathers from them.
+    pub records: Option<NormalisedRecords>,
     /// Pixels whose camera ray hit nothing or an emitter in every sample (method.md §7.3: the
     /// evaluation keeps the noisy value there). Empty if the frame had no descriptors.
     pub passthrough: Vec<bool>,
@@ -140,24 +140,58 @@ pub fn prepare(frame: &Frame) -> Result<PreparedImage, PrepareError> {
     Ok(img)
 }
 
-/// [`prepare`] for inference: moves the frame's descriptors into `records` as they are instead
-/// of copying them into planes; inference normalises them chunk by chunk as it reads them.
+/// [`prepare`] for inference: moves the frame's descriptors into `records` and normalises
+/// them there, in place, instead of copying them into planes; inference then only gathers the
+/// columns of the pixels it reads ([`PreparedImage::descriptor_columns`]).
 pub fn prepare_for_inference(frame: &mut Frame) -> Result<PreparedImage, PrepareError> {
     let mut img = prepare_blocks(frame)?;
-    img.records = frame.descriptors.take();
+    img.records = frame.descriptors.take().map(NormalisedRecords::new);
     Ok(img)
+}
+
+/// [`prepare`] without the descriptor planes: the colour and G-buffer blocks, and from the
+/// descriptors (left in the frame) the path weight and the pass-through mask.
+pub fn prepare_without_descriptors(frame: &Frame) -> Result<PreparedImage, PrepareError> {
+    prepare_blocks(frame)
+}
+
+/// The renderer's per-sample records with their 36 descriptor channels normalised in place
+/// ([`normalise_descriptor`], non-finite values zeroed); the 37th field (the path weight)
+/// is left as it was. Same layout as [`Descriptors`]: pixel-major, then sample, then field.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NormalisedRecords(Descriptors);
+
+impl NormalisedRecords {
+    pub fn new(mut d: Descriptors) -> Self {
+        for rec in d.data.chunks_exact_mut(FIELDS) {
+            for (c, v) in rec[..DESCRIPTOR_CHANNELS].iter_mut().enumerate() {
+                *v = finite(normalise_descriptor(c, *v));
+            }
+        }
+        NormalisedRecords(d)
+    }
+
+    /// The normalised descriptors of `pixels` as `[S, 36, len]`: the first `s` samples of each.
+    pub fn columns(&self, s: usize, pixels: &[usize]) -> Vec<f32> {
+        gather_columns(&self.0, s, pixels, |_, v| v)
+    }
 }
 
 /// Normalised descriptors of `pixels` (indices into the record image) as `[S, 36, len]`: the
 /// first `s` samples of each pixel, method.md §4.1 transform, non-finite values zeroed.
 pub fn normalised_columns(d: &Descriptors, s: usize, pixels: &[usize]) -> Vec<f32> {
+    gather_columns(d, s, pixels, |c, v| finite(normalise_descriptor(c, v)))
+}
+
+/// `[S, 36, len]` columns of the first `s` samples of `pixels`, each value through `f(channel, v)`.
+fn gather_columns(d: &Descriptors, s: usize, pixels: &[usize], f: impl Fn(usize, f32) -> f32) -> Vec<f32> {
     let (ds, len) = (d.spp as usize, pixels.len());
     let mut out = vec![0.0f32; s * DESCRIPTOR_CHANNELS * len];
     for (j, &i) in pixels.iter().enumerate() {
         for k in 0..s {
             let rec = &d.data[(i * ds + k) * FIELDS..(i * ds + k) * FIELDS + DESCRIPTOR_CHANNELS];
             for (c, &v) in rec.iter().enumerate() {
-                out[(k * DESCRIPTOR_CHANNELS + c) * len + j] = finite(normalise_descriptor(c, v));
+                out[(k * DESCRIPTOR_CHANNELS + c) * len + j] = f(c, v);
             }
         }
     }
@@ -345,8 +379,8 @@ impl PreparedImage {
         self.descriptors.is_some() || self.records.is_some()
     }
 
-    /// Normalised descriptors of `pixels` (indices into this image) as `[S, 36, len]`, from
-    /// the planes or the records, whichever the image holds.
+    /// Normalised descriptors of `pixels` (indices into this image) as `[S, 36, len]`, gathered
+    /// from the planes or the records, whichever the image holds (both are normalised already).
     pub fn descriptor_columns(&self, pixels: &[usize]) -> Option<Vec<f32>> {
         if let Some(d) = &self.descriptors {
             let n = self.width * self.height;
@@ -357,7 +391,7 @@ impl PreparedImage {
             }
             return Some(out);
         }
-        self.records.as_ref().map(|r| normalised_columns(r, self.spp, pixels))
+        self.records.as_ref().map(|r| r.columns(self.spp, pixels))
     }
 
     /// Stacks crops of equal size and spp into one batch. Without descriptors, the descriptor

@@ -116,6 +116,11 @@ pub struct TrainArgs {
     /// darker median (docs/denoiser.md, "L1 plus a relative L2 term"). 0 = not computed.
     #[arg(long, default_value_t = 0.0, value_parser = non_negative)]
     pub rel_l2_weight: f64,
+    /// Add the relative L2 term to each patch's L1 before a relative --loss-scale divides it by
+    /// the input's error, so that it too weighs every sample count alike (without this flag it
+    /// is added after, unscaled, and the 2-spp patches rule it).
+    #[arg(long, requires = "rel_l2_weight")]
+    pub rel_l2_inside: bool,
     /// Learning rate of E in the joint stage.
     #[arg(long)]
     pub lr_joint_e: Option<f64>,
@@ -194,6 +199,7 @@ fn schedule_options(a: &TrainArgs, config: &DenoiserConfig) -> ScheduleOptions {
     }
     o.loss_scale = a.loss_scale;
     o.rel_l2_weight = a.rel_l2_weight;
+    o.rel_l2_inside = a.rel_l2_inside;
     o.lr_shape = if a.lr_schedule == "constant" { LrShape::Constant } else { LrShape::WarmupCosine { warmup: a.warmup } };
     o
 }
@@ -347,6 +353,9 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
     let config = a.preset.config();
     if !(0.0..1.0).contains(&a.warmup) {
         bail!("--warmup {}: expected a fraction in [0, 1)", a.warmup);
+    }
+    if a.rel_l2_inside && a.loss_scale.input_power().is_none() {
+        bail!("--rel-l2-inside needs a --loss-scale relative to the input (it is {})", a.loss_scale);
     }
     let sampling = a.sampling;
     let stages = schedule::plan(method, ablation, &schedule_options(&a, &config));

@@ -85,7 +85,7 @@ fn tiled_equals_untiled() {
     }
 }
 
-/// Inference from the renderer's records (normalised as read, `prepare_for_inference`) gives
+/// Inference from the renderer's records (normalised in place, `prepare_for_inference`) gives
 /// bit for bit what it gives from the normalised planes (`prepare`), tiled or not, for
 /// every method; records with more samples than the image use their first `spp`.
 #[test]
@@ -102,7 +102,7 @@ fn records_equal_planes() {
     planes.descriptors = Some(crate::preprocess::normalised_columns(&rec, s, &all));
     let mut records = planes.clone();
     records.descriptors = None;
-    records.records = Some(rec);
+    records.records = Some(crate::preprocess::NormalisedRecords::new(rec));
     let noisy = vec![0.5f32; 3 * w * h];
     let cfg = tiny();
     for m in [Method::P, Method::Both, Method::Guided] {

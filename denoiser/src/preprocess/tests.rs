@@ -165,7 +165,7 @@ fn non_finite_buffers_give_finite_inputs() {
     }
 }
 
-/// `prepare_for_inference` keeps the records (moved, not copied) and reads back exactly what
+/// `prepare_for_inference` keeps the records (moved and normalised in place) and reads back exactly what
 /// `prepare` puts into planes: same blocks, same columns for any pixel list, same crops.
 #[test]
 fn records_read_like_planes() {
@@ -181,7 +181,7 @@ fn records_read_like_planes() {
     let records = prepare_for_inference(&mut g).unwrap();
     assert!(g.descriptors.is_none(), "moved into the prepared image");
     assert!(records.descriptors.is_none() && records.has_descriptors());
-    assert_eq!(records.records.as_ref(), f.descriptors.as_ref());
+    assert_eq!(records.records, f.descriptors.clone().map(NormalisedRecords::new));
     let mut stripped = records.clone();
     stripped.records = None;
     let mut planes_stripped = planes.clone();

@@ -10,7 +10,7 @@ use film::{exr_io, Descriptors};
 use super::augment::{self, Dihedral};
 use super::patches::{self, PatchSampler, Sampling};
 use super::TrainError;
-use crate::preprocess::{prepare, prepare_for_inference, prepare_target, InputTensors, PreparedImage, PreparedTarget, TargetTensors};
+use crate::preprocess::{prepare, prepare_target, prepare_without_descriptors, InputTensors, PreparedImage, PreparedTarget, TargetTensors};
 
 /// One shot: its inputs at every sample count, its target and its patch sampler.
 pub struct Shot {
@@ -112,13 +112,11 @@ pub fn load_shot(root: &Path, dir: &str, spps: &[usize], opts: &LoadOptions) -> 
         let img = if s == max && opts.descriptors {
             let mut img = prepare(&frame).map_err(|e| err(&p, e))?;
             descriptors = img.descriptors.take();
-            desc = frame.descriptors.take();
             img
         } else {
-            let mut img = prepare_for_inference(&mut frame).map_err(|e| err(&p, e))?;
-            desc = img.records.take();
-            img
+            prepare_without_descriptors(&frame).map_err(|e| err(&p, e))?
         };
+        desc = frame.descriptors.take();
         images.push(img);
     }
     let (w, h) = (target.width, target.height);

@@ -29,7 +29,7 @@ use burn::module::{Module, ModuleVisitor, ParamId};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor};
 
-use crate::loss::{l1, l1_relative_to_input, l1_tonemapped, path_disentangling_loss, rel_l2, rel_mse_test};
+use crate::loss::{l1, l1_tonemapped, path_disentangling_loss, rel_l2, rel_mse_test, relative_to_input};
 use crate::method::{BranchNets, Method, MethodModel, MethodOutput};
 use crate::model::DenoiserConfig;
 use crate::preprocess::TargetTensors;
@@ -305,15 +305,19 @@ pub fn stage_loss(out: MethodOutput, t: &TargetTensors, stage: &Stage, noisy: Op
         StageKind::FinetuneToneMapped => l1_tonemapped(out.radiance, t.total.clone()),
         StageKind::Branches | StageKind::Joint => {
             let (d, s) = (out.diffuse.output, out.specular.output);
-            let mut loss = match (stage.loss_scale, stage.loss_scale.input_power(), noisy) {
+            let power = stage.loss_scale.input_power();
+            let inside = stage.rel_l2_inside && power.is_some();
+            let mut loss = match (stage.loss_scale, power, noisy) {
                 (LossScale::RelativeL2, ..) => rel_l2(d.clone(), t.diffuse.clone()) + rel_l2(s.clone(), t.specular.clone()),
-                (_, Some(power), Some(n)) => {
-                    l1_relative_to_input(&[(d.clone(), n.diffuse, t.diffuse.clone()), (s.clone(), n.specular, t.specular.clone())], power)
-                }
+                (_, Some(power), Some(n)) => relative_to_input(
+                    &[(d.clone(), n.diffuse, t.diffuse.clone()), (s.clone(), n.specular, t.specular.clone())],
+                    power,
+                    if inside { stage.rel_l2_weight as f32 } else { 0.0 },
+                ),
                 (_, Some(_), None) => panic!("a relative loss scale needs the noisy colour (NoisyColour::for_stage)"),
                 (_, None, _) => l1(d.clone(), t.diffuse.clone()) + l1(s.clone(), t.specular.clone()),
             };
-            if stage.rel_l2_weight > 0.0 {
+            if stage.rel_l2_weight > 0.0 && !inside {
                 loss = loss + (rel_l2(d, t.diffuse.clone()) + rel_l2(s, t.specular.clone())).mul_scalar(stage.rel_l2_weight);
             }
             if stage.w_path > 0.0 {

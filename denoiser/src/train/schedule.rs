@@ -53,6 +53,10 @@ pub struct Stage {
     /// where L1 settles for the darker median. Files and logs without the field mean 0.
     #[serde(default)]
     pub rel_l2_weight: f64,
+    /// Whether that term is added to each patch's L1 before a relative scale divides it by the
+    /// input's error ([`crate::loss::relative_to_input`]), rather than added after, unscaled.
+    #[serde(default)]
+    pub rel_l2_inside: bool,
 }
 
 /// How a stage's learning rates vary over its steps.
@@ -71,7 +75,17 @@ impl Stage {
     /// A stage at constant rates with the paper's plain L1: what benchmarks, examples and
     /// tests of a single step use.
     pub fn constant(kind: StageKind, steps: usize, lr_rest: Option<f64>, lr_e: Option<f64>, w_path: f64) -> Self {
-        Stage { kind, steps, lr_rest, lr_e, w_path, shape: LrShape::Constant, loss_scale: LossScale::Absolute, rel_l2_weight: 0.0 }
+        Stage {
+            kind,
+            steps,
+            lr_rest,
+            lr_e,
+            w_path,
+            shape: LrShape::Constant,
+            loss_scale: LossScale::Absolute,
+            rel_l2_weight: 0.0,
+            rel_l2_inside: false,
+        }
     }
 
     /// Multiplier of the stage's rates at 0-based `step`.
@@ -178,6 +192,9 @@ pub struct ScheduleOptions {
     /// Weight of the relative L2 term added to the branch and joint losses ([`Stage::rel_l2_weight`]).
     #[serde(default)]
     pub rel_l2_weight: f64,
+    /// [`Stage::rel_l2_inside`].
+    #[serde(default)]
+    pub rel_l2_inside: bool,
 }
 
 impl Default for ScheduleOptions {
@@ -198,6 +215,7 @@ impl Default for ScheduleOptions {
             finetune_loss: FinetuneLoss::Linear,
             loss_scale: LossScale::Absolute,
             rel_l2_weight: 0.0,
+            rel_l2_inside: false,
         }
     }
 }
@@ -240,6 +258,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 shape: o.lr_shape,
                 loss_scale: o.loss_scale,
                 rel_l2_weight: o.rel_l2_weight,
+                rel_l2_inside: o.rel_l2_inside,
             }]
         }
         (_, Some(Ablation::FixNTrain)) => {
@@ -253,6 +272,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 shape: o.lr_shape,
                 loss_scale: o.loss_scale,
                 rel_l2_weight: o.rel_l2_weight,
+                rel_l2_inside: o.rel_l2_inside,
             }]
         }
         (_, Some(Ablation::FullNFull)) => {
@@ -265,6 +285,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 shape: o.lr_shape,
                 loss_scale: o.loss_scale,
                 rel_l2_weight: o.rel_l2_weight,
+                rel_l2_inside: o.rel_l2_inside,
             }]
         }
         (m, _) => vec![
@@ -277,6 +298,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 shape: o.lr_shape,
                 loss_scale: o.loss_scale,
                 rel_l2_weight: o.rel_l2_weight,
+                rel_l2_inside: o.rel_l2_inside,
             },
             Stage {
                 kind: o.finetune_loss.stage_kind(),
@@ -288,6 +310,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 loss_scale: o.loss_scale,
                 // The finetune losses are on radiance and take no branch terms.
                 rel_l2_weight: 0.0,
+                rel_l2_inside: false,
             },
         ],
     }
@@ -314,6 +337,7 @@ mod tests {
             shape: LrShape::WarmupCosine { warmup: 0.05 },
             loss_scale: LossScale::Absolute,
             rel_l2_weight: 0.0,
+            rel_l2_inside: false,
         };
         assert!((s.lr_factor(0) - 0.1).abs() < 1e-12);
         assert!((s.lr_factor(10) - 1.0).abs() < 1e-12);
