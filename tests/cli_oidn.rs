@@ -3,8 +3,8 @@
 //!
 //! Needs python3 with venv support and network access to PyPI the first time: the binary
 //! installs the pyoidn wheel into `target/oidn-venv` (about 8 s) and reuses it afterwards.
-//! Without it these tests fail (they are required in CI), except the one that makes OIDN
-//! unavailable on purpose.
+//! Without it those tests fail; they are in the network tier (`#[ignore]`d, so run with
+//! `-- --include-ignored`, as CI does: docs/architecture.md, "Tests"). The others need no OIDN.
 
 mod common;
 
@@ -36,6 +36,7 @@ fn rel_mse(path: &Path) -> f64 {
 /// denoised (27×); a factor of 5 leaves a wide margin, yet an identity (1×), a blank or a
 /// scrambled output fails it. Both commands give it.
 #[test]
+#[ignore = "network tier: installs Open Image Denoise (pyoidn) from PyPI the first time; run with --include-ignored"]
 fn oidn_denoises_a_real_frame_in_both_commands() {
     let d = out_dir("cli-oidn-frame");
     let frame = d.join("frame.exr");
@@ -95,6 +96,7 @@ fn oidn_refuses_weights_options() {
 /// `eval` with the oidn method: its row in the quality, time and breakdown tables (below noisy,
 /// with positive times), its panel in the pictures, and its measurements cached by version.
 #[test]
+#[ignore = "network tier: installs Open Image Denoise (pyoidn) from PyPI the first time; run with --include-ignored"]
 fn eval_has_an_oidn_row_curve_and_panel() {
     let base = out_dir("cli-oidn-eval");
     let list = scene_list(&base.join("scenes"), true);
