@@ -59,18 +59,23 @@ crate::names::named!(LossScale, "loss scale");
 /// specular): a black patch whose input is already exact divides by this, not by 0.
 pub const RELATIVE_L1_EPS: f32 = 1e-3;
 
-/// Per patch of `[B, 3, H, W]` pairs: Σ_pairs mean|x − y|, shape `[B]`.
-fn l1_per_patch(pairs: &[(Tensor<4>, Tensor<4>)]) -> Tensor<1> {
+/// Per patch of `[B, 3, H, W]` pairs: Σ_pairs mean of `f(x, y)` over the patch, shape `[B]`.
+fn per_patch(pairs: &[(Tensor<4>, Tensor<4>)], f: impl Fn(Tensor<4>, Tensor<4>) -> Tensor<4>) -> Tensor<1> {
     let mut total: Option<Tensor<1>> = None;
     for (x, y) in pairs {
         let [b, ..] = x.dims();
-        let d = (x.clone() - y.clone()).abs().reshape([b as i32, -1]).mean_dim(1).reshape([b]);
+        let d = f(x.clone(), y.clone()).reshape([b as i32, -1]).mean_dim(1).reshape([b]);
         total = Some(match total {
             Some(t) => t + d,
             None => d,
         });
     }
     total.expect("at least one pair")
+}
+
+/// Per patch: Σ_pairs mean|x − y|, shape `[B]`.
+fn l1_per_patch(pairs: &[(Tensor<4>, Tensor<4>)]) -> Tensor<1> {
+    per_patch(pairs, |x, y| (x - y).abs())
 }
 
 /// mean over patches b of Σ_k mean|out_k − t_k| / (Σ_k mean|in_k − t_k| + [`RELATIVE_L1_EPS`])^power,
@@ -101,20 +106,9 @@ pub fn relative_to_input(branches: &[(Tensor<4>, Tensor<4>, Tensor<4>)], power: 
     (numerator / denominator).mean()
 }
 
-/// Per patch of `[B, 3, H, W]` pairs: Σ_pairs [`rel_l2`] of the patch, shape `[B]`.
+/// Per patch: Σ_pairs [`rel_l2`] of the patch, shape `[B]`.
 fn rel_l2_per_patch(pairs: &[(Tensor<4>, Tensor<4>)]) -> Tensor<1> {
-    let mut total: Option<Tensor<1>> = None;
-    for (x, y) in pairs {
-        let [b, ..] = x.dims();
-        let d = x.clone() - y.clone();
-        let x_hat = x.clone().detach();
-        let r = (d.clone() * d / (x_hat.clone() * x_hat).add_scalar(REL_L2_EPS)).reshape([b as i32, -1]).mean_dim(1).reshape([b]);
-        total = Some(match total {
-            Some(t) => t + r,
-            None => r,
-        });
-    }
-    total.expect("at least one pair")
+    per_patch(pairs, rel_l2_elements)
 }
 
 /// ε of [`rel_l2`]'s denominator, in branch units: Noise2Noise's 0.01.
@@ -122,9 +116,14 @@ pub const REL_L2_EPS: f32 = 0.01;
 
 /// mean over elements of (x − y)² / (x̂² + [`REL_L2_EPS`]), x̂ = x without gradient.
 pub fn rel_l2(x: Tensor<4>, y: Tensor<4>) -> Tensor<1> {
+    rel_l2_elements(x, y).mean()
+}
+
+/// (x − y)² / (x̂² + [`REL_L2_EPS`]) element by element, x̂ = x without gradient.
+fn rel_l2_elements(x: Tensor<4>, y: Tensor<4>) -> Tensor<4> {
     let d = x.clone() - y;
     let x_hat = x.detach();
-    (d.clone() * d / (x_hat.clone() * x_hat).add_scalar(REL_L2_EPS)).mean()
+    d.clone() * d / (x_hat.clone() * x_hat).add_scalar(REL_L2_EPS)
 }
 
 /// Mean absolute error over all elements.

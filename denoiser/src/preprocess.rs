@@ -132,7 +132,7 @@ fn push_gradients(buf: &mut Vec<f32>, start: usize, planes: usize, w: usize, h: 
 /// present (the first `frame.spp` samples of them, since lower spp renders are prefixes) and
 /// normalised into planes `[S, 36, H, W]` that crops and batches can cut (training).
 pub fn prepare(frame: &Frame) -> Result<PreparedImage, PrepareError> {
-    let mut img = prepare_blocks(frame)?;
+    let mut img = prepare_without_descriptors(frame)?;
     if let Some(d) = &frame.descriptors {
         let all: Vec<usize> = (0..img.width * img.height).collect();
         img.descriptors = Some(normalised_columns(d, img.spp, &all));
@@ -144,15 +144,9 @@ pub fn prepare(frame: &Frame) -> Result<PreparedImage, PrepareError> {
 /// them there, in place, instead of copying them into planes; inference then only gathers the
 /// columns of the pixels it reads ([`PreparedImage::descriptor_columns`]).
 pub fn prepare_for_inference(frame: &mut Frame) -> Result<PreparedImage, PrepareError> {
-    let mut img = prepare_blocks(frame)?;
+    let mut img = prepare_without_descriptors(frame)?;
     img.records = frame.descriptors.take().map(NormalisedRecords::new);
     Ok(img)
-}
-
-/// [`prepare`] without the descriptor planes: the colour and G-buffer blocks, and from the
-/// descriptors (left in the frame) the path weight and the pass-through mask.
-pub fn prepare_without_descriptors(frame: &Frame) -> Result<PreparedImage, PrepareError> {
-    prepare_blocks(frame)
 }
 
 /// The renderer's per-sample records with their 36 descriptor channels normalised in place
@@ -199,8 +193,9 @@ fn gather_columns(d: &Descriptors, s: usize, pixels: &[usize], f: impl Fn(usize,
 }
 
 /// Everything of [`prepare`] but the descriptor planes: colour and G-buffer blocks, and from the
-/// descriptors (checked against the frame) the path weight and the pass-through mask.
-fn prepare_blocks(frame: &Frame) -> Result<PreparedImage, PrepareError> {
+/// descriptors (checked against the frame, and left in it) the path weight and the pass-through
+/// mask.
+pub fn prepare_without_descriptors(frame: &Frame) -> Result<PreparedImage, PrepareError> {
     let (w, h) = (frame.width as usize, frame.height as usize);
     let n = w * h;
     let s = frame.spp.max(1);
