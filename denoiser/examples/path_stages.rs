@@ -1,16 +1,21 @@
-//! Times the path-manifold module's stages on random descriptors: the whole-image forward vs
-//! the per-sample stages over pixel chunks of different shapes.
+//! Times the per-sample stages of the path-manifold module on random descriptors, side by side
+//! in one process: as tensor ops on the whole image (`PathNet::embed`, `pixel_mean`,
+//! `head_pool`: what inference ran before) and fused on the host (`infer::PathMlp`: what it runs
+//! now), with the ratio. Rounds interleave the two.
 //!
-//! `cargo run --release -p denoiser --example path_stages -- [size] [spp] [chunk]`
+//! `cargo run --release -p denoiser --example path_stages -- [size] [spp] [preset] [rounds]`
+//! (preset: default or kpcn)
 //!
-//! With `BREAKDOWN=size,spp` it instead runs `infer::denoise` of a random guided `default` model
+//! With `BREAKDOWN=size,spp` it instead runs `infer::denoise` of a random guided `kpcn` model
 //! on a random image (automatic tile, then one window) and prints the `Timings`.
 
 use std::time::Instant;
 
 use denoiser::burn::tensor::{Distribution, Tensor};
+use denoiser::infer::PathMlp;
 use denoiser::model::DenoiserConfig;
 use denoiser::pathnet::PathNet;
+use denoiser::preprocess::PreparedImage;
 
 fn main() {
     if let Ok(v) = std::env::var("BREAKDOWN") {
@@ -19,57 +24,63 @@ fn main() {
     }
     let args: Vec<String> = std::env::args().skip(1).collect();
     let num = |i: usize, d: usize| args.get(i).and_then(|s| s.parse().ok()).unwrap_or(d);
-    let (size, s, chunk) = (num(0, 272), num(1, 8), num(2, 1 << 17));
+    let (size, s) = (num(0, 256), num(1, 8));
+    let preset = args.get(2).map_or("default", String::as_str);
+    let rounds = num(3, 3);
+    let cfg = if preset == "kpcn" { DenoiserConfig::kpcn_cpu() } else { DenoiserConfig::cpu_default() };
     let d = denoiser::cpu_device();
-    let net = DenoiserConfig::kpcn_cpu().pathnet.init(1, &d);
-    let u = Distribution::Uniform(0.0, 1.0);
-    let x: Tensor<5> = Tensor::random([1, s, 36, size, size], u, &d);
-    let sync = |t: Tensor<4>| t.into_data();
-    let t = Instant::now();
-    let _ = sync(net.forward(x.clone()).pixel_buffer());
-    println!("forward whole: {:.2} s", t.elapsed().as_secs_f64());
-    let t = Instant::now();
-    let e = net.embed(x.clone());
-    let _ = sync(PathNet::pixel_mean(&e));
-    println!("embed+mean whole: {:.2} s", t.elapsed().as_secs_f64());
-    let t = Instant::now();
-    let g = net.unet(PathNet::pixel_mean(&e));
-    let g = Tensor::<4>::from_data(g.into_data(), &d);
-    println!("unet whole: {:.2} s", t.elapsed().as_secs_f64());
-    let t = Instant::now();
-    let _ = sync(net.head_pool(e, g.clone()).pixel_buffer());
-    println!("head_pool whole: {:.2} s", t.elapsed().as_secs_f64());
-    // Chunks of rows [1, S, 36, r, size] and flat chunks [1, S, 36, 1, n].
-    let rows = (chunk / s / size).max(1);
-    for flat in [false, true] {
-        let (mut te, mut th) = (0.0, 0.0);
-        for y0 in (0..size).step_by(rows) {
-            let r = rows.min(size - y0);
-            let xc = x.clone().narrow(3, y0, r);
-            let gc = g.clone().narrow(2, y0, r);
-            let (xc, gc) = if flat {
-                let xc: Tensor<5> = Tensor::from_data(xc.into_data(), &d);
-                (xc.reshape([1, s, 36, 1, r * size]), Tensor::<4>::from_data(gc.into_data(), &d).reshape([1, g.dims()[1], 1, r * size]))
-            } else {
-                (Tensor::from_data(xc.into_data(), &d), Tensor::from_data(gc.into_data(), &d))
-            };
-            let t = Instant::now();
-            let e = net.embed(xc);
-            let _ = sync(PathNet::pixel_mean(&e));
-            te += t.elapsed().as_secs_f64();
-            let t = Instant::now();
-            let e = net.embed(Tensor::<5>::random([1, s, 36, if flat { 1 } else { r }, if flat { r * size } else { size }], u, &d));
-            let _ = sync(net.head_pool(e, gc).pixel_buffer());
-            th += t.elapsed().as_secs_f64();
-        }
-        println!("chunked ({}) {rows} rows: embed+mean {te:.2} s, embed+head_pool {th:.2} s", if flat { "flat 1×n" } else { "rows" });
+    let net = cfg.pathnet.init(1, &d);
+    let x: Tensor<5> = Tensor::random([1, s, 36, size, size], Distribution::Uniform(0.0, 1.0), &d);
+    let desc: Vec<f32> = x.clone().into_data().convert::<f32>().try_into_vec::<f32>().unwrap();
+    let n = size * size;
+    let image = PreparedImage {
+        width: size,
+        height: size,
+        spp: s,
+        diffuse: Vec::new(),
+        specular: Vec::new(),
+        g_block: Vec::new(),
+        path_weight: Vec::new(),
+        descriptors: Some(desc),
+        records: None,
+        passthrough: Vec::new(),
+    };
+    let g = net.unet(PathNet::pixel_mean(&net.embed(x.clone())));
+    let gw = g.dims()[1];
+    let g_host: Vec<f32> = g.clone().into_data().convert::<f32>().try_into_vec::<f32>().unwrap();
+    let pixels: Vec<usize> = (0..n).collect();
+    println!("{size}×{size}, {s} spp, {preset} PathNet, {} thread(s); seconds per round:", rayon::current_num_threads());
+    let (mut tensor_s, mut host_s) = (Vec::new(), Vec::new());
+    for _ in 0..rounds {
+        let t = Instant::now();
+        let e = net.embed(x.clone());
+        let _ = PathNet::pixel_mean(&e).into_data();
+        let e = net.embed(x.clone());
+        let _ = net.head_pool(e, g.clone()).pixel_buffer().into_data();
+        tensor_s.push(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        let mlp = PathMlp::new(&net);
+        let _ = mlp.mean_embedding(&image, &pixels);
+        let _ = mlp.pixel_buffer(&image, &pixels, &|p, out: &mut [f32]| {
+            for (c, o) in out.iter_mut().enumerate() {
+                *o = g_host[c * n + p];
+            }
+        });
+        host_s.push(t.elapsed().as_secs_f64());
+        assert_eq!(gw, g_host.len() / n);
     }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (a, b) = (median(&mut tensor_s), median(&mut host_s));
+    println!("tensor stages {a:.3} s, fused host stages {b:.3} s (medians of {rounds}): {:.1}× faster", a / b);
+    println!("fused: {:.2} s per megapixel", b / (n as f64 / 1e6));
 }
 
 fn denoise_breakdown(size: usize, s: usize) {
     use denoiser::infer::{denoise, InferOptions};
     use denoiser::method::{Method, MethodModel};
-    use denoiser::preprocess::PreparedImage;
     let d = denoiser::cpu_device();
     let cfg = DenoiserConfig::kpcn_cpu();
     let model = MethodModel::init(&cfg, Method::Guided, &d);

@@ -25,8 +25,10 @@ pub struct DatasetArgs {
     /// docs/dataset.md).
     #[arg(long, default_value_t = 4)]
     pub shots: u32,
-    /// Noisy sample counts; each is a prefix of the largest (same seed, same streams).
-    #[arg(long, value_delimiter = ',', default_value = "2,4,8,16,32")]
+    /// Noisy sample counts; each is a prefix of the largest (same seed, same streams). 64 is in
+    /// the default so that the denoisers see inputs as converged as the 64-spp tests
+    /// (docs/dataset.md).
+    #[arg(long, value_delimiter = ',', default_value = "2,4,8,16,32,64")]
     pub spp: Vec<u32>,
     /// Reference samples per pixel.
     #[arg(long, default_value_t = 1024)]

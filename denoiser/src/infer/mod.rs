@@ -16,9 +16,10 @@
 //! so no overlap), its per-pixel mean mirror-padded like the image, the U-Net over windows of
 //! the padded mean map carrying [`pathnet_radius`] of context (window origins and sizes aligned
 //! to 2^(levels−1) pixels so the 2×2 pooling grid stays in phase with the whole image), then the
-//! per-sample head over chunks again (the embedding is recomputed rather than stored: storing it
-//! would cost spp × E floats per pixel). Each sample is thus embedded twice and passed through
-//! the head once, whatever the tile size — before, every overlapping window recomputed them.
+//! per-sample head again (the embedding is recomputed rather than stored: storing it would cost
+//! spp × E floats per pixel). Each sample is thus embedded twice and passed through the head
+//! once, whatever the tile size. The per-sample stages run fused on the host, pixel by pixel in
+//! parallel ([`PathMlp`]), not as tensor ops.
 //!
 //! **Tiles.** The padded image is then cut into windows, each giving a `tile × tile` block of
 //! output. A window carries [`context`] pixels of input around its block: the KPCN margin plus
@@ -29,7 +30,7 @@
 //! forward on the whole padded image up to f32 rounding of differently-blocked arithmetic
 //! (tested).
 //!
-//! Memory: only one chunk of samples, one U-Net window or one batch of windows is ever a tensor;
+//! Memory: only one U-Net window or one batch of windows is ever a tensor;
 //! the prepared image itself (descriptors included) and the per-pixel maps stay planar on the CPU.
 //!
 //! [`PathNet`]: crate::pathnet::PathNet
@@ -41,13 +42,15 @@ use crate::model::DenoiserConfig;
 use crate::preprocess::PreparedImage;
 
 mod frame;
+mod path_mlp;
 mod path_stage;
 mod tiles;
 mod timing;
 mod window;
 
 pub use frame::{denoise_frame, denoised_frame, FrameError, FrameRun};
-pub use path_stage::{pathnet_radius, CHUNK_SAMPLE_PIXELS};
+pub use path_mlp::PathMlp;
+pub use path_stage::pathnet_radius;
 pub use tiles::{alignment, auto_tile, context, unet_window_side, window_side};
 pub use timing::Timings;
 
@@ -111,7 +114,7 @@ pub fn denoise(
     opts: &InferOptions,
     device: &Device,
 ) -> Result<Denoised, InferError> {
-    tiles::denoise_chunked(model, config, image, noisy, opts, CHUNK_SAMPLE_PIXELS, device)
+    tiles::denoise_tiled(model, config, image, noisy, opts, device)
 }
 
 /// A tensor's values read back into host memory, as f32.

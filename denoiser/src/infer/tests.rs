@@ -1,7 +1,7 @@
 //! Tests of whole-image inference: tiled and staged results against the model's forward on the
 //! whole padded image, records against planes, timings, context, hostile input and errors.
 
-use super::tiles::{clean, denoise_chunked};
+use super::tiles::{clean, denoise_tiled};
 use super::timing::timed_forward;
 use super::window::{align_up, reflect, window};
 use super::*;
@@ -280,8 +280,8 @@ fn staged_equals_model_forward_for(cfg: &DenoiserConfig, w: usize, h: usize, til
             let padded = window(&img, m, 0, 0, pw, ph, true);
             let reference = to_vec(model.forward(PreparedImage::to_tensors(&[&padded], &d)).radiance);
             let (ow, oh) = (pw - 2 * m, ph - 2 * m);
-            for (tile, chunk) in [(1000, CHUNK_SAMPLE_PIXELS), (tiles[0], 50), (tiles[1], CHUNK_SAMPLE_PIXELS)] {
-                let out = denoise_chunked(&model, &cfg, &img, &noisy, &InferOptions { tile, batch: 2 }, chunk, &d).unwrap();
+            for tile in [1000, tiles[0], tiles[1]] {
+                let out = denoise_tiled(&model, &cfg, &img, &noisy, &InferOptions { tile, batch: 2 }, &d).unwrap();
                 for y in 0..h {
                     for x in 0..w {
                         let i = y * w + x;
@@ -290,7 +290,7 @@ fn staged_equals_model_forward_for(cfg: &DenoiserConfig, w: usize, h: usize, til
                             let got = out.radiance[3 * i + ch];
                             assert!(
                                 (got - want).abs() <= 1e-5 + 1e-4 * want.abs(),
-                                "{method} spp {spp} tile {tile} chunk {chunk} ({x},{y},{ch}): {got} vs {want}"
+                                "{method} spp {spp} tile {tile} ({x},{y},{ch}): {got} vs {want}"
                             );
                         }
                     }

@@ -45,9 +45,9 @@ pub fn unet_window_side(config: &DenoiserConfig, method: Method, tile: usize) ->
 /// output). U-Net columns need far more context (their receptive radius), so their tiles are
 /// 1024: images up to that size run as one window, and larger ones waste ≤ 1.7× on context.
 /// Windows hold per-pixel inputs only, so the sample count does not matter here; the per-sample
-/// stages run in chunks of [`CHUNK_SAMPLE_PIXELS`].
+/// stages run per pixel ([`PathMlp`]).
 ///
-/// [`CHUNK_SAMPLE_PIXELS`]: super::CHUNK_SAMPLE_PIXELS
+/// [`PathMlp`]: super::PathMlp
 pub fn auto_tile(config: &DenoiserConfig) -> usize {
     if config.mskp.is_some() {
         1024
@@ -56,17 +56,15 @@ pub fn auto_tile(config: &DenoiserConfig) -> usize {
     }
 }
 
-/// [`denoise`] with the chunk size of the per-sample stages as a parameter (tests use small
-/// chunks so that chunk boundaries fall inside rows).
+/// See [`denoise`].
 ///
 /// [`denoise`]: super::denoise
-pub(super) fn denoise_chunked(
+pub(super) fn denoise_tiled(
     model: &MethodModel,
     config: &DenoiserConfig,
     image: &PreparedImage,
     noisy: &[f32],
     opts: &InferOptions,
-    chunk: usize,
     device: &Device,
 ) -> Result<Denoised, InferError> {
     let t0 = Instant::now();
@@ -97,7 +95,7 @@ pub(super) fn denoise_chunked(
     let pbufs: Option<[Vec<f32>; 2]> = match (&model.diffuse.path, &model.specular.path) {
         (Some(pd), Some(ps)) => {
             let unet = (tile, pathnet_radius(config), a, unet_window_side(config, method, tile));
-            Some([pd, ps].map(|net| path_buffer(net, image, (m, pw, ph), unet, chunk, device)))
+            Some([pd, ps].map(|net| path_buffer(net, image, (m, pw, ph), unet, device)))
         }
         _ => None,
     };
