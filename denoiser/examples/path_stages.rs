@@ -61,7 +61,7 @@ fn main() {
         let t = Instant::now();
         let mlp = PathMlp::new(&net);
         let _ = mlp.mean_embedding(&image, &pixels);
-        let _ = mlp.pixel_buffer(&image, &pixels, &|p, out: &mut [f32]| {
+        let _ = mlp.pixel_buffer(&image, &pixels, |p, out: &mut [f32]| {
             for (c, o) in out.iter_mut().enumerate() {
                 *o = g_host[c * n + p];
             }

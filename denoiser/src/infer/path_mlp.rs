@@ -136,7 +136,7 @@ impl PathMlp {
         image: &PreparedImage,
         pixels: &[usize],
         per_pixel: usize,
-        f: &(dyn Fn(usize, &[f32], &mut [f32]) + Sync),
+        f: impl Fn(usize, &[f32], &mut [f32]) + Sync,
     ) -> Vec<f32> {
         let s = image.spp.max(1);
         let parts: Vec<Vec<f32>> = pixels
@@ -165,7 +165,7 @@ impl PathMlp {
     pub fn mean_embedding(&self, image: &PreparedImage, pixels: &[usize]) -> Vec<f32> {
         let e = self.embed_width();
         let s = image.spp.max(1);
-        self.per_pixel(image, pixels, e, &|_, desc, out| {
+        self.per_pixel(image, pixels, e, |_, desc, out| {
             let (mut a, mut b, mut one) = (vec![0.0; self.width], vec![0.0; self.width], vec![0.0; e]);
             for x in desc.chunks_exact(DESCRIPTOR_CHANNELS) {
                 self.embed_one(x, &mut a, &mut b, &mut one);
@@ -178,10 +178,10 @@ impl PathMlp {
     /// [f_P, v_P] (`C + 1` floats, pixel-major) of each listed pixel given its U-Net context
     /// `context(k)` (G floats) for the k-th listed pixel: the head on every sample, ReLU, the
     /// mean over samples and the mean over channels of the unbiased variance divided by S.
-    pub fn pixel_buffer(&self, image: &PreparedImage, pixels: &[usize], context: &(dyn Fn(usize, &mut [f32]) + Sync)) -> Vec<f32> {
+    pub fn pixel_buffer(&self, image: &PreparedImage, pixels: &[usize], context: impl Fn(usize, &mut [f32]) + Sync) -> Vec<f32> {
         let (e, c, s) = (self.embed_width(), self.out_channels(), image.spp.max(1));
         let g_width = self.head_g.weight_t.len() / self.head_g.outputs;
-        self.per_pixel(image, pixels, c + 1, &|k, desc, out| {
+        self.per_pixel(image, pixels, c + 1, |k, desc, out| {
             let (mut a, mut b, mut emb) = (vec![0.0; self.width], vec![0.0; self.width], vec![0.0; e]);
             let mut g = vec![0.0; g_width];
             context(k, &mut g);
@@ -235,7 +235,7 @@ mod tests {
             let (w, h) = (11, 9);
             let n = w * h;
             let mut rng = SplitMix64::new(3);
-            let mut desc: Vec<f32> = (0..spp * DESCRIPTOR_CHANNELS * n).map(|_| rng.symmetric(2.0) as f32).collect();
+            let mut desc: Vec<f32> = (0..spp * DESCRIPTOR_CHANNELS * n).map(|_| rng.symmetric(2.0)).collect();
             desc[5] = f32::NAN;
             desc[17] = 1e9;
             let image = PreparedImage {
@@ -268,7 +268,7 @@ mod tests {
             let g = net.unet(PathNet::pixel_mean(&e));
             let g_host = to_vec(g.clone());
             let want = to_vec(net.head_pool(e, g).pixel_buffer()); // [C+1, n]
-            let got = mlp.pixel_buffer(&image, &pixels, &|k, out: &mut [f32]| {
+            let got = mlp.pixel_buffer(&image, &pixels, |k, out: &mut [f32]| {
                 for (c, o) in out.iter_mut().enumerate() {
                     *o = g_host[c * n + pixels[k]] as f32;
                 }

@@ -92,7 +92,7 @@ pub(super) fn path_buffer(
     // Head and pooling per padded pixel, re-embedding its samples (storing the embeddings would
     // cost spp × E floats per pixel).
     let source: Vec<usize> = (0..np).map(|p| rows[p / pw] * w + cols[p % pw]).collect();
-    let v = mlp.pixel_buffer(image, &source, &|p, g: &mut [f32]| {
+    let v = mlp.pixel_buffer(image, &source, |p, g: &mut [f32]| {
         for (c, o) in g.iter_mut().enumerate() {
             *o = g_map[c * np + p];
         }
