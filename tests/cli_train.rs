@@ -292,7 +292,7 @@ fn calibrate_writes_the_kept_exponent_and_nothing_else() {
     let provenance = meta.to_string();
     assert!(provenance.contains(&format!("guide_gain_exponent 0 -> {kept}")), "{provenance}");
     for (weights, exps, why) in [
-        ("denoiser/weights/g-default.safetensors", "--exponents=0,1", "no edge-stopping guides"),
+        ("denoiser/weights/swap/g-default.safetensors", "--exponents=0,1", "no edge-stopping guides"),
         (input, "--exponents=-1", "finite values in [0, 4]"),
     ] {
         let o = Command::new(env!("CARGO_BIN_EXE_pixguide"))
