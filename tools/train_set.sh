@@ -21,7 +21,8 @@ backend=${BACKEND:-tch}
 preset=${PRESET:-edge-noise}
 # The loss of g, both and the joint stage: each patch's L1 plus a relative L2 term, divided by
 # its input's error (docs/denoiser.md, "L1 plus a relative L2 term"); p keeps the relative L1,
-# on which it is better at 32-64 spp.
+# on which it is better at 32-64 spp. The joint stage moves the pretrained columns at 1e-5 (the
+# preset's 5e-5 made guided worse than both its columns on a caustic scene; docs/denoiser.md).
 inside=(--loss-scale relative-to-input --rel-l2-weight 1 --rel-l2-inside)
 relative=(--loss-scale relative-to-input)
 common=(--backend "$backend" --data "$data" --preset "$preset" --patch 96 --batch 2 --resume --quiet)
@@ -40,7 +41,7 @@ if [ ! -s "$out/g.safetensors" ] || [ ! -s "$out/p.safetensors" ]; then
     wait
 fi
 [ -s "$out/guided.safetensors" ] || train guided 2 --method guided "${inside[@]}" --from-g "$out/g.safetensors" \
-    --from-p "$out/p.safetensors" --joint-steps "${GUIDED_STEPS:-180}" --val-every 40 --minutes "${GUIDED_MIN:-14}"
+    --from-p "$out/p.safetensors" --joint-steps "${GUIDED_STEPS:-180}" --lr-joint-rest 1e-5 --val-every 40 --minutes "${GUIDED_MIN:-14}"
 if [ -n "${BOTH_MIN:-}" ] && [ ! -s "$out/both.safetensors" ]; then
     train both 2 --method both "${inside[@]}" --lr-branches 3e-4 --branch-steps "${BOTH_STEPS:-400}" --finetune-steps 0 \
         --val-every 50 --minutes "$BOTH_MIN"
