@@ -73,12 +73,13 @@ fn relu(v: &mut [f32]) {
     v.iter_mut().for_each(|x| *x = x.max(0.0));
 }
 
-/// A [`ConvStack`] of 1×1 layers: ReLU after every layer but the last.
+/// A [`ConvStack`]'s 1×1 layers as dense layers (the callers apply its ReLUs between them).
 fn stack(s: &ConvStack) -> Vec<Dense> {
     s.layers.iter().map(Dense::from_conv).collect()
 }
 
-/// Runs `layers` (ReLU between them) from `first`'s output in `a`; returns the output's buffer.
+/// Runs `layers` on the `width` values in `a` (the previous layer's output), each after a ReLU;
+/// returns the last output, in `a` or `b`.
 fn run_rest<'a>(layers: &[Dense], mut a: &'a mut [f32], mut b: &'a mut [f32], width: usize) -> &'a mut [f32] {
     let mut w = width;
     for l in layers {
@@ -129,8 +130,8 @@ impl PathMlp {
         out.copy_from_slice(e);
     }
 
-    /// Runs `f(pixel, its descriptors [S][36] sanitised)` over `pixels` in parallel, each task
-    /// writing `per_pixel` floats per pixel; returns them pixel-major.
+    /// Runs `f(k, descriptors [S][36] of pixels[k] sanitised, output)` for every position k of
+    /// `pixels` in parallel, each writing `per_pixel` floats; returns them in the order of `pixels`.
     fn per_pixel(
         &self,
         image: &PreparedImage,
