@@ -87,7 +87,7 @@ pub struct TargetTensors {
     pub total: Tensor<4>,
 }
 
-fn finite(x: f32) -> f32 {
+pub(crate) fn finite(x: f32) -> f32 {
     if x.is_finite() {
         x
     } else {

@@ -8,11 +8,13 @@
 //! = var·S/(S−1)… see [`PixelBuffer::population_variance_of_samples`].
 
 pub mod channels;
+pub mod descriptor_file;
 pub mod descriptors;
 pub mod error;
 pub mod exr_io;
 
-pub use descriptors::Descriptors;
+pub use descriptor_file::DescriptorFile;
+pub use descriptors::{Descriptors, Precision};
 pub use error::{Error, Result};
 
 /// Largest accepted image side and pixel count of a render; the EXR reader refuses larger

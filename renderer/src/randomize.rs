@@ -1,8 +1,10 @@
 //! Per-shot randomisation for training data (issue 4, method.md §7.1): camera, material
-//! parameters and environment, all drawn from one seed so a shot can be regenerated exactly.
+//! parameters and textures, emitters' strength and colour, and the environment, all drawn from
+//! one seed so a shot can be regenerated exactly.
 //!
-//! What is never randomised, because physical correctness depends on it: the specular
-//! reflectance of conductors (their complex IOR), the IOR and tint of glass, and emitters.
+//! What is never randomised, because physical correctness depends on it: the complex IOR of
+//! conductors (a tint, textured or not, only scales their Fresnel reflectance) and the IOR and
+//! tint of glass. Emitters keep their shape and place; only their radiance is scaled and tinted.
 
 use crate::camera::Camera;
 use crate::light::{Environment, Lights};
@@ -125,32 +127,62 @@ fn describe(kind: &MaterialKind) -> String {
         MaterialKind::Lambert { albedo: ColorParam::Const(a) } => format!("diffuse {:.3},{:.3},{:.3}", a.x, a.y, a.z),
         MaterialKind::Lambert { .. } => "diffuse textured".into(),
         MaterialKind::Plastic { ior, roughness, .. } => format!("plastic ior {ior:.3} alpha {roughness:.4}"),
-        MaterialKind::Conductor { roughness, .. } => format!("conductor alpha {roughness:.4}"),
+        MaterialKind::Conductor { roughness, specular_tint: ColorParam::Const(_), .. } => format!("conductor alpha {roughness:.4}"),
+        MaterialKind::Conductor { roughness, .. } => format!("conductor textured alpha {roughness:.4}"),
         MaterialKind::Dielectric { ior, roughness, .. } => format!("dielectric ior {ior:.3} alpha {roughness:.4}"),
     }
 }
 
-fn random_material(orig: &Material, rng: &mut Pcg32) -> Material {
+/// Relative linear-sRGB colour of a light between warm (t = −1, about 2700 K) and cool (t = 1,
+/// about 8000 K) white, at unit luminance so that the tint changes no exposure.
+fn light_tint(t: f32) -> Vec3 {
+    let (warm, white, cool) = (Vec3::new(1.0, 0.6, 0.3), Vec3::ONE, Vec3::new(0.75, 0.85, 1.0));
+    let c = if t < 0.0 { white.lerp(warm, -t) } else { white.lerp(cool, t) };
+    c / luminance(c)
+}
+
+/// A texture of the scene for a surface that had none: 0 .. n picks one, None keeps the colour.
+fn random_texture(rng: &mut Pcg32, n_textures: usize, p: f32) -> Option<u32> {
+    let pick = rng.next_f32() < p;
+    let k = (rng.next_f32() * n_textures as f32) as usize;
+    (pick && n_textures > 0).then_some(k.min(n_textures.saturating_sub(1)) as u32)
+}
+
+fn random_material(orig: &Material, rng: &mut Pcg32, n_textures: usize) -> Material {
     let mut m = orig.clone();
     if orig.is_emissive() {
+        // Half to twice the authored power: the exposure range a denoiser meets from lamps, with
+        // the sky's own range (0.6–1.5×) for environment-lit scenes; 60 % of lights turn warm or cool.
+        let scale = 0.5 * 4f32.powf(rng.next_f32());
+        let t = uniform(rng, -1.0, 1.0);
+        let tint = if rng.next_f32() < 0.6 { light_tint(t) } else { Vec3::ONE };
+        m.emission = orig.emission * scale * tint;
         return m;
     }
     m.kind = match &orig.kind {
         MaterialKind::Dielectric { ior, tint, .. } => {
             MaterialKind::Dielectric { ior: *ior, roughness: roughness(rng), tint: *tint, dist: Default::default() }
         }
-        MaterialKind::Conductor { eta, k, specular_tint, .. } => MaterialKind::Conductor {
-            eta: *eta,
-            k: *k,
-            roughness: roughness(rng),
-            specular_tint: specular_tint.clone(),
-            dist: Default::default(),
-        },
+        MaterialKind::Conductor { eta, k, specular_tint, .. } => {
+            // A third of untextured metals get one of the scene's textures as their tint,
+            // lifted towards white (tarnish, inlay, engraving): textured conductors are in the
+            // test scenes (veach-ajar's floor) and the training scenes had none.
+            let specular_tint = match (specular_tint, random_texture(rng, n_textures, 0.35)) {
+                (ColorParam::Const(c), Some(index)) => ColorParam::texture(index, *c * uniform(rng, 0.7, 1.0)),
+                (t, _) => t.clone(),
+            };
+            MaterialKind::Conductor { eta: *eta, k: *k, roughness: roughness(rng), specular_tint, dist: Default::default() }
+        }
         MaterialKind::Lambert { albedo } | MaterialKind::Plastic { albedo, .. } => {
             let colour = Vec3::new(uniform(rng, 0.01, 1.0), uniform(rng, 0.01, 1.0), uniform(rng, 0.01, 1.0));
             // Keep textures half of the time: they carry the fine detail denoisers must keep.
-            let albedo = match albedo {
-                ColorParam::Texture { .. } | ColorParam::Checkerboard { .. } if rng.next_f32() < 0.5 => albedo.clone(),
+            let keep = rng.next_f32() < 0.5;
+            let new_texture = random_texture(rng, n_textures, 0.25);
+            let albedo = match (albedo, new_texture) {
+                (ColorParam::Texture { .. } | ColorParam::Checkerboard { .. }, _) if keep => albedo.clone(),
+                // A quarter of surfaces get a texture of the scene, tinted: more texture detail
+                // on more shapes than the authors drew.
+                (_, Some(index)) => ColorParam::texture(index, colour.max(Vec3::splat(0.2))),
                 _ => ColorParam::Const(colour),
             };
             if rng.next_f32() < 0.6 {
@@ -257,8 +289,16 @@ pub fn randomize(scene: &mut Scene, orig: &Original, name: &str, shot: u32, seed
     let (_, cam, eye, target, up, fov) = best;
     scene.camera = cam;
 
-    scene.materials = orig.materials.iter().map(|m| random_material(m, &mut rng)).collect();
-    let materials = scene.materials.iter().map(|m| format!("{}: {}", m.name, describe(&m.kind))).collect();
+    let n_textures = scene.textures.len();
+    scene.materials = orig.materials.iter().map(|m| random_material(m, &mut rng, n_textures)).collect();
+    let materials = scene
+        .materials
+        .iter()
+        .map(|m| match m.is_emissive() {
+            true => format!("{}: {} emission {:.3},{:.3},{:.3}", m.name, describe(&m.kind), m.emission.x, m.emission.y, m.emission.z),
+            false => format!("{}: {}", m.name, describe(&m.kind)),
+        })
+        .collect();
 
     // Environment: a fresh procedural sky per shot (scenes without any environment keep none,
     // e.g. closed Cornell boxes, where it would only cost time).
@@ -360,6 +400,40 @@ mod scene_tests {
             let ratio = again.env_white / orig.env_white;
             assert!(ratio > 0.5 && ratio < 1.7, "shot {shot}: ratio {ratio} ({})", p.environment);
             assert!(camera_score(&scene, &scene.camera) > 0.2, "shot {shot} sees nothing");
+        }
+    }
+
+    #[test]
+    fn lights_change_power_and_colour_within_bounds_and_metals_get_textures() {
+        let (mut textured_metals, mut lights) = (0, 0);
+        // Sky-lit metals on marble, and lamp-lit metals on a textured table.
+        for (name, shot) in (0..12).map(|k| ("metal-spheres-sky", k)).chain((0..4).map(|k| ("copper-bowls", k))) {
+            let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../scenes/{name}/scene.toml"));
+            let mut scene = Scene::load(&path).unwrap();
+            let orig = Original::of(&scene);
+            randomize(&mut scene, &orig, name, shot, 3);
+            for (m, o) in scene.materials.iter().zip(&orig.materials) {
+                if o.is_emissive() {
+                    // Power: 0.5–2× the authored luminance (the tint has unit luminance).
+                    let r = luminance(m.emission) / luminance(o.emission);
+                    assert!((0.5 - 1e-4..=2.0 + 1e-4).contains(&r), "{}: {r}", m.name);
+                    lights += 1;
+                }
+                if let MaterialKind::Conductor { specular_tint, .. } = &m.kind {
+                    // A textured tint stays a reflectance: texels ≤ 1 times a scale ≤ 1.
+                    if let ColorParam::Texture { scale, index, .. } = specular_tint {
+                        assert!(scale.max_element() <= 1.0 && (*index as usize) < scene.textures.len());
+                        textured_metals += 1;
+                    }
+                }
+            }
+        }
+        // 3 metals × 12 shots at 35 %: 12.6 expected; fewer than 3 has probability < 10⁻³.
+        assert!(textured_metals >= 3, "{textured_metals}");
+        assert!(lights >= 4, "copper-bowls' two lamps were not seen");
+        for t in [-1.0, -0.3, 0.0, 0.5, 1.0] {
+            let c = light_tint(t);
+            assert!((luminance(c) - 1.0).abs() < 1e-5 && c.min_element() > 0.0, "{t}: {c}");
         }
     }
 }

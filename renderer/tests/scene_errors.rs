@@ -122,6 +122,25 @@ fn non_finite_texels_name_the_image() {
     write_exr(&dir.join("bad_tex.exr"), 2, 2, |x, _| if x == 1 { [0.0, f32::INFINITY, 0.0] } else { [0.5; 3] });
     let p = scene_with(&dir, "tex.toml", &format!("{CAMERA}[materials.m]\ntype = \"diffuse\"\nalbedo_texture = \"bad_tex.exr\"\n"));
     expect_error(&p, &["materials.m.albedo_texture", "bad_tex.exr"]);
+    // A conductor's tint texture must stay a reflectance: a texel above 1 is an error, and a
+    // good one multiplies `specular_tint`.
+    write_exr(&dir.join("tint.exr"), 2, 1, |x, _| if x == 1 { [1.5, 0.5, 0.5] } else { [0.5; 3] });
+    let metal = |tex: &str| {
+        format!("{CAMERA}{QUAD}[materials.cu]\ntype = \"conductor\"\npreset = \"Cu\"\nspecular_tint = [0.5, 1, 1]\nspecular_tint_texture = \"{tex}\"\n")
+    };
+    let p = scene_with(&dir, "tint.toml", &metal("tint.exr"));
+    expect_error(&p, &["materials.cu.specular_tint_texture", "tint.exr", "above 1"]);
+    write_exr(&dir.join("tint_ok.exr"), 2, 1, |x, _| [0.5 * x as f32, 1.0, 0.25]);
+    let scene = load(&scene_with(&dir, "tint_ok.toml", &metal("tint_ok.exr")));
+    let cu = scene.materials.iter().find(|m| m.name == "cu").unwrap();
+    match &cu.kind {
+        renderer::scene::MaterialKind::Conductor { specular_tint, .. } => {
+            // Texel (1, 0) times the constant tint, read at its centre.
+            let v = specular_tint.eval(glam::Vec2::new(0.75, 0.5), &scene.textures);
+            assert!((v - Vec3::new(0.25, 1.0, 0.25)).length() < 1e-5, "{v}");
+        }
+        k => panic!("{k:?}"),
+    }
     // A good EXR loads as linear values, unchanged.
     write_exr(&dir.join("good.exr"), 2, 1, |x, _| [0.25 * x as f32, 3.0, 0.0]);
     let p = scene_with(&dir, "good.toml", &format!("{CAMERA}{QUAD}[environment]\nmap = \"good.exr\"\nscale = 2\n"));

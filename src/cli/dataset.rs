@@ -48,8 +48,18 @@ pub struct DatasetArgs {
     /// every shot made and writes the index and contact sheet.
     #[arg(long, value_parser = parse_shard)]
     pub shard: Option<(usize, usize)>,
+    /// Storage of the per-sample descriptors: bf16 (half the bytes, f32's range, 0.4 %
+    /// relative; docs/formats.md) or f32.
+    #[arg(long, value_enum, default_value = "bf16")]
+    pub descriptor_precision: DescriptorPrecision,
     #[arg(short, long)]
     pub quiet: bool,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum DescriptorPrecision {
+    Bf16,
+    F32,
 }
 
 /// `K/N` with 1 ≤ K ≤ N → (K − 1, N).
@@ -169,7 +179,11 @@ pub fn run(a: DatasetArgs) -> Result<()> {
             let exr = dir.join(format!("noisy_{spp}spp.exr"));
             film::exr_io::write_frame(&frame, &exr)?;
             if let Some(d) = &frame.descriptors {
-                d.write_safetensors(&dir.join(format!("descriptors_{spp}spp.safetensors")))?;
+                let precision = match a.descriptor_precision {
+                    DescriptorPrecision::Bf16 => film::Precision::Bf16,
+                    DescriptorPrecision::F32 => film::Precision::F32,
+                };
+                d.write_safetensors_as(&dir.join(format!("descriptors_{spp}spp.safetensors")), precision)?;
             }
         }
         let mut ref_opts = RenderOptions::from_scene(scene, BufferRequest { split: true, gbuffers: true, descriptors: false });

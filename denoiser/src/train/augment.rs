@@ -90,10 +90,36 @@ const COLOUR_GRADIENTS: [(usize, usize, usize); 3] = [(0, 4, 7), (1, 5, 8), (2, 
 const G_GRADIENTS: [(usize, usize, usize); 7] = [(0, 4, 7), (1, 5, 8), (2, 6, 9), (10, 12, 13), (14, 18, 21), (15, 19, 22), (16, 20, 23)];
 const G_NORMAL: usize = 0;
 
+/// Where a patch's descriptors come from.
+pub trait DescriptorSource {
+    /// The normalised descriptors `[S, 36, len]` of `pixels` (indices into the image).
+    fn columns(&self, pixels: &[usize]) -> Vec<f32>;
+}
+
+/// Normalised descriptor planes `[S_img, 36, H·W]` in memory, and the sample count to cut
+/// (a prefix).
+pub struct Planes<'a> {
+    pub data: &'a [f32],
+    pub spp: usize,
+    pub pixels: usize,
+}
+
+impl DescriptorSource for Planes<'_> {
+    fn columns(&self, pixels: &[usize]) -> Vec<f32> {
+        (0..self.spp * DESCRIPTOR_CHANNELS).flat_map(|plane| pixels.iter().map(move |&i| self.data[plane * self.pixels + i])).collect()
+    }
+}
+
 /// The `p × p` patch at (x, y) of `img`, moved by `t`, its gradients recomputed (see the module
-/// comment). `descriptors`: the image's normalised descriptor planes `[S_img, 36, H, W]` and the
-/// sample count to cut (a prefix), or `None` to cut none.
-pub fn cut_image(img: &PreparedImage, descriptors: Option<(&[f32], usize)>, x: usize, y: usize, p: usize, t: Dihedral) -> PreparedImage {
+/// comment), with the descriptors of `descriptors` if given.
+pub fn cut_image(
+    img: &PreparedImage,
+    descriptors: Option<&dyn DescriptorSource>,
+    x: usize,
+    y: usize,
+    p: usize,
+    t: Dihedral,
+) -> PreparedImage {
     let (w, h) = (img.width, img.height);
     assert!(x + p <= w && y + p <= h, "patch {p}² at ({x},{y}) outside {w}×{h}");
     let n = w * h;
@@ -147,7 +173,7 @@ pub fn cut_image(img: &PreparedImage, descriptors: Option<(&[f32], usize)>, x: u
         }
         out
     };
-    let descriptors = descriptors.map(|(d, s)| (0..s * DESCRIPTOR_CHANNELS).flat_map(|plane| moved(d, plane)).collect());
+    let descriptors = descriptors.map(|d| d.columns(&index));
     PreparedImage {
         width: p,
         height: p,
@@ -181,6 +207,10 @@ pub fn cut_target(t_img: &PreparedTarget, x: usize, y: usize, o: usize, t: Dihed
 mod tests {
     use super::*;
     use crate::rng::SplitMix64;
+
+    fn planes<'a>(img: &PreparedImage, data: &'a [f32], spp: usize) -> Planes<'a> {
+        Planes { data, spp, pixels: img.width * img.height }
+    }
 
     fn random_image(w: usize, h: usize, s: usize, seed: u64) -> PreparedImage {
         let mut rng = SplitMix64::new(seed);
@@ -235,9 +265,9 @@ mod tests {
         let img = random_image(p, p, 3, 1);
         let d = img.descriptors.clone().unwrap();
         for t in Dihedral::all() {
-            let a = cut_image(&img, Some((&d, 3)), 0, 0, p, t);
+            let a = cut_image(&img, Some(&planes(&img, &d, 3)), 0, 0, p, t);
             let ad = a.descriptors.clone().unwrap();
-            let back = cut_image(&a, Some((&ad, 3)), 0, 0, p, t.inverse());
+            let back = cut_image(&a, Some(&planes(&a, &ad, 3)), 0, 0, p, t.inverse());
             assert_eq!(back, img, "{t:?}");
             if t != Dihedral::IDENTITY {
                 assert_ne!(a, img, "{t:?} moved nothing");
@@ -260,9 +290,9 @@ mod tests {
     fn patch_of_augmented_image() {
         let img = random_image(12, 12, 2, 3);
         let d = img.descriptors.clone().unwrap();
-        assert_eq!(cut_image(&img, Some((&d, 2)), 2, 3, 6, Dihedral::IDENTITY), img.crop(2, 3, 6, 6).unwrap());
+        assert_eq!(cut_image(&img, Some(&planes(&img, &d, 2)), 2, 3, 6, Dihedral::IDENTITY), img.crop(2, 3, 6, 6).unwrap());
         for t in Dihedral::all() {
-            let whole = cut_image(&img, Some((&d, 2)), 0, 0, 12, t);
+            let whole = cut_image(&img, Some(&planes(&img, &d, 2)), 0, 0, 12, t);
             // Patch at (2, 3) of side 6 lands at T's image of its corners in the whole image.
             let (u0, v0) = {
                 let corners = [(2, 3), (7, 3), (2, 8), (7, 8)].map(|(x, y)| t.forward(x, y, 12));
@@ -270,8 +300,8 @@ mod tests {
             };
             let wd = whole.descriptors.clone().unwrap();
             assert_eq!(
-                cut_image(&img, Some((&d, 2)), 2, 3, 6, t),
-                cut_image(&whole, Some((&wd, 2)), u0, v0, 6, Dihedral::IDENTITY),
+                cut_image(&img, Some(&planes(&img, &d, 2)), 2, 3, 6, t),
+                cut_image(&whole, Some(&planes(&whole, &wd, 2)), u0, v0, 6, Dihedral::IDENTITY),
                 "{t:?}"
             );
         }

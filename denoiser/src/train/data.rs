@@ -5,12 +5,15 @@ use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
 use film::descriptors::{field, FIELDS};
-use film::{exr_io, Descriptors};
+use film::{exr_io, DescriptorFile, Descriptors};
 
-use super::augment::{self, Dihedral};
+use super::augment::{self, DescriptorSource, Dihedral};
 use super::patches::{self, PatchSampler, Sampling};
 use super::TrainError;
-use crate::preprocess::{prepare, prepare_target, prepare_without_descriptors, InputTensors, PreparedImage, PreparedTarget, TargetTensors};
+use crate::preprocess::{
+    finite, normalise_descriptor, prepare_target, prepare_without_descriptors, InputTensors, PreparedImage, PreparedTarget, TargetTensors,
+    DESCRIPTOR_CHANNELS,
+};
 
 /// One shot: its inputs at every sample count, its target and its patch sampler.
 pub struct Shot {
@@ -18,9 +21,10 @@ pub struct Shot {
     pub name: String,
     /// Inputs per entry of [`Dataset::spps`], without descriptors (those are shared below).
     pub images: Vec<PreparedImage>,
-    /// Normalised descriptors of the largest sample count `[S_max, 36, H, W]`; a render at
-    /// fewer samples uses the first S of them (the dataset's lower counts are prefixes).
-    pub descriptors: Option<Vec<f32>>,
+    /// The per-sample descriptors of the largest sample count, read from disk patch by patch
+    /// (a 64-spp training set's descriptors outgrow memory); a render at fewer samples uses
+    /// the first S of each pixel's (the dataset's lower counts are prefixes).
+    pub descriptors: Option<DescriptorFile>,
     pub target: PreparedTarget,
     pub sampler: PatchSampler,
 }
@@ -97,8 +101,17 @@ pub fn load_shot(root: &Path, dir: &str, spps: &[usize], opts: &LoadOptions) -> 
     } else {
         None
     };
+    let descriptors = match (&desc, opts.descriptors) {
+        (Some(d), true) => {
+            let f = DescriptorFile::open(&desc_path).map_err(|e| err(&desc_path, e))?;
+            if (f.width, f.height, f.spp) != (d.width, d.height, d.spp) {
+                return Err(err(&desc_path, "changed while it was read"));
+            }
+            Some(f)
+        }
+        _ => None,
+    };
     let mut images = Vec::with_capacity(spps.len());
-    let mut descriptors = None;
     for &s in spps {
         let p = d.join(format!("noisy_{s}spp.exr"));
         let mut frame = exr_io::read_frame(&p).map_err(|e| err(&p, e))?;
@@ -106,16 +119,9 @@ pub fn load_shot(root: &Path, dir: &str, spps: &[usize], opts: &LoadOptions) -> 
             return Err(err(&p, format!("{}×{} but the reference is {}×{}", frame.width, frame.height, target.width, target.height)));
         }
         // The descriptors are lent to each spp's frame (for the path weight and the
-        // pass-through mask) and taken back; only the largest spp of a P-buffer run normalises
-        // them into planes.
+        // pass-through mask) and taken back; patches read them from the file.
         frame.descriptors = desc.take();
-        let img = if s == max && opts.descriptors {
-            let mut img = prepare(&frame).map_err(|e| err(&p, e))?;
-            descriptors = img.descriptors.take();
-            img
-        } else {
-            prepare_without_descriptors(&frame).map_err(|e| err(&p, e))?
-        };
+        let img = prepare_without_descriptors(&frame).map_err(|e| err(&p, e))?;
         desc = frame.descriptors.take();
         images.push(img);
     }
@@ -206,19 +212,11 @@ impl Dataset {
         Ok(Dataset { root: root.to_path_buf(), spps, train, val, width, height })
     }
 
-    /// Bytes held by the prepared arrays (for the memory report).
+    /// Bytes held by the prepared arrays (for the memory report); the descriptors stay on disk.
     pub fn bytes(&self) -> usize {
         let img =
             |i: &PreparedImage| 4 * (i.diffuse.len() + i.specular.len() + i.g_block.len() + i.path_weight.len()) + i.passthrough.len();
-        self.train
-            .iter()
-            .chain(&self.val)
-            .map(|s| {
-                s.images.iter().map(img).sum::<usize>()
-                    + 4 * s.descriptors.as_ref().map_or(0, Vec::len)
-                    + 4 * 9 * s.target.width * s.target.height
-            })
-            .sum()
+        self.train.iter().chain(&self.val).map(|s| s.images.iter().map(img).sum::<usize>() + 4 * 9 * s.target.width * s.target.height).sum()
     }
 }
 
@@ -233,12 +231,40 @@ pub struct PatchRef {
     pub t: Dihedral,
 }
 
+/// The first `spp` samples of a descriptor file, normalised as [`crate::preprocess::prepare`]
+/// normalises them in memory (the same values, bit for bit).
+pub struct FileColumns<'a> {
+    pub file: &'a DescriptorFile,
+    pub spp: usize,
+}
+
+impl DescriptorSource for FileColumns<'_> {
+    fn columns(&self, pixels: &[usize]) -> Vec<f32> {
+        let (len, s) = (pixels.len(), self.spp);
+        let mut out = vec![0.0f32; s * DESCRIPTOR_CHANNELS * len];
+        let mut rec = vec![0.0f32; s * FIELDS];
+        for (j, &i) in pixels.iter().enumerate() {
+            // The file was checked at open and the index lies in the image, so a failure here
+            // is the disk failing under a running training: nothing sensible goes on from it.
+            if let Err(e) = self.file.read_prefix(i, s, &mut rec) {
+                panic!("reading descriptors for training: {e}");
+            }
+            for (k, r) in rec.chunks_exact(FIELDS).enumerate() {
+                for (c, &v) in r[..DESCRIPTOR_CHANNELS].iter().enumerate() {
+                    out[(k * DESCRIPTOR_CHANNELS + c) * len + j] = finite(normalise_descriptor(c, v));
+                }
+            }
+        }
+        out
+    }
+}
+
 /// Cuts a patch: inputs (with the first S descriptor samples if the model needs them) and the
 /// target cropped to the output (`margin` less on each side), both moved by `r.t`.
 pub fn cut(shot: &Shot, r: &PatchRef, spp: usize, patch: usize, margin: usize, with_descriptors: bool) -> (PreparedImage, PreparedTarget) {
     let img = &shot.images[r.spp];
-    let desc = if with_descriptors { shot.descriptors.as_deref().map(|d| (d, spp)) } else { None };
-    let crop = augment::cut_image(img, desc, r.x, r.y, patch, r.t);
+    let source = shot.descriptors.as_ref().filter(|_| with_descriptors).map(|file| FileColumns { file, spp });
+    let crop = augment::cut_image(img, source.as_ref().map(|s| s as &dyn DescriptorSource), r.x, r.y, patch, r.t);
     let o = patch - 2 * margin;
     let t = augment::cut_target(&shot.target, r.x + margin, r.y + margin, o, r.t);
     (crop, t)
@@ -254,8 +280,11 @@ pub fn batch_tensors(
     with_descriptors: bool,
     device: &Device,
 ) -> (InputTensors, TargetTensors) {
+    // In parallel: a P-buffer patch reads and normalises its descriptors (up to 64 × 36 values
+    // a pixel). The order of the batch is the order of `refs` whatever the thread count.
+    use rayon::prelude::*;
     let cuts: Vec<(PreparedImage, PreparedTarget)> =
-        refs.iter().map(|r| cut(&shots[r.shot], r, spps[r.spp], patch, margin, with_descriptors)).collect();
+        refs.par_iter().map(|r| cut(&shots[r.shot], r, spps[r.spp], patch, margin, with_descriptors)).collect();
     let imgs: Vec<&PreparedImage> = cuts.iter().map(|c| &c.0).collect();
     let tgts: Vec<&PreparedTarget> = cuts.iter().map(|c| &c.1).collect();
     (PreparedImage::to_tensors(&imgs, device), PreparedTarget::to_tensors(&tgts, device))

@@ -64,15 +64,19 @@ fn shot(name: &str, seed: u64, spps: &[usize]) -> Shot {
         }
     };
     let mut images: Vec<PreparedImage> = Vec::new();
-    let mut descriptors = None;
     for &s in spps {
         let mut img = prepare(&noisy(&mut rng, s)).unwrap();
-        if s as u32 == max {
-            descriptors = img.descriptors.take();
-        }
         img.descriptors = None;
         images.push(img);
     }
+    // Training reads descriptors from their file, as from a dataset folder. The file is
+    // unlinked once open (where the system allows it), so tests leave nothing behind.
+    static FILES: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let k = FILES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let path = std::env::temp_dir().join(format!("pixguide-train-desc-{}-{k}.safetensors", std::process::id()));
+    desc.write_safetensors(&path).unwrap();
+    let descriptors = Some(film::DescriptorFile::open(&path).unwrap());
+    let _ = std::fs::remove_file(&path);
     let mut reference = noisy(&mut rng, 1_000_000);
     reference.radiance.mean = refc.clone();
     reference.diffuse.as_mut().unwrap().mean = refc.iter().map(|x| x * 0.7).collect();
@@ -405,4 +409,28 @@ fn calibration_scores_each_exponent_and_keeps_the_lowest() {
     assert_eq!(kept.1.overall, lowest);
     let set = model.diffuse.d_g.as_ref().and_then(|c| c.unet.as_ref()).map(|u| u.guide_gain_exponent);
     assert_eq!(set, Some(cal.best));
+}
+
+#[test]
+fn descriptors_read_from_their_file_equal_the_planes_in_memory() {
+    // `prepare` normalises a frame's descriptors into planes; training reads the same values
+    // from the dataset's file, patch by patch, for any prefix of the samples and any pixels.
+    let mut rng = SplitMix64::new(5);
+    let mut d = Descriptors::new(7, 5, 8);
+    d.data.iter_mut().for_each(|v| *v = (rng.next_f64() as f32 - 0.1) * 1e3);
+    d.data[3] = f32::NAN;
+    for precision in [film::Precision::F32, film::Precision::Bf16] {
+        let path = std::env::temp_dir().join(format!("pixguide-desc-eq-{precision:?}-{}.safetensors", std::process::id()));
+        d.write_safetensors_as(&path, precision).unwrap();
+        let whole = Descriptors::read_safetensors(&path).unwrap();
+        let file = film::DescriptorFile::open(&path).unwrap();
+        let _ = std::fs::remove_file(&path);
+        let pixels: Vec<usize> = vec![34, 0, 7, 7, 12, 33];
+        for s in [1, 3, 8] {
+            let from_file = augment::DescriptorSource::columns(&data::FileColumns { file: &file, spp: s }, &pixels);
+            let in_memory = crate::preprocess::normalised_columns(&whole, s, &pixels);
+            assert_eq!(from_file, in_memory, "{precision:?}, {s} spp");
+            assert!(from_file.iter().all(|v| v.is_finite()));
+        }
+    }
 }

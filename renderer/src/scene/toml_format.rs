@@ -123,6 +123,9 @@ pub struct MaterialDef {
     pub eta: Option<[f32; 3]>,
     pub k: Option<[f32; 3]>,
     pub specular_tint: Option<[f32; 3]>,
+    /// Image whose texels multiply `specular_tint` over the surface (patinated, engraved or
+    /// inlaid metals); texels must lie in [0, 1] like the tint itself.
+    pub specular_tint_texture: Option<String>,
     pub tint: Option<[f32; 3]>,
     pub emission: Option<[f32; 3]>,
     pub strength: Option<f32>,
@@ -430,7 +433,7 @@ fn material(check: &Check, b: &mut Builder, dir: &Path, name: &str, d: &Material
     let f = |key: &str| format!("materials.{name}.{key}");
     use MaterialType::*;
     // Keys that make sense for this type; anything else is a mistake worth reporting.
-    let given: [(&str, bool, &[MaterialType]); 9] = [
+    let given: [(&str, bool, &[MaterialType]); 10] = [
         ("albedo", d.albedo.is_some(), &[Diffuse, Plastic]),
         ("albedo_texture", d.albedo_texture.is_some(), &[Diffuse, Plastic]),
         ("roughness", d.roughness.is_some(), &[Conductor, Dielectric, Plastic]),
@@ -439,6 +442,7 @@ fn material(check: &Check, b: &mut Builder, dir: &Path, name: &str, d: &Material
         ("eta", d.eta.is_some(), &[Conductor]),
         ("k", d.k.is_some(), &[Conductor]),
         ("specular_tint", d.specular_tint.is_some(), &[Conductor]),
+        ("specular_tint_texture", d.specular_tint_texture.is_some(), &[Conductor]),
         ("tint", d.tint.is_some(), &[Dielectric]),
     ];
     for (key, present, types) in given {
@@ -495,11 +499,23 @@ fn material(check: &Check, b: &mut Builder, dir: &Path, name: &str, d: &Material
                 (None, None, Some(_)) => return Err(check.err(&f("eta"), "missing (explicit `k` needs `eta`)")),
                 (None, None, None) => return Err(check.err(&f("preset"), "missing (a conductor needs `preset` or `eta` and `k`)")),
             };
-            let specular_tint = match d.specular_tint {
+            let tint = match d.specular_tint {
                 Some(t) => check.unit3(&f("specular_tint"), t)?,
                 None => Vec3::ONE,
             };
-            MaterialKind::Conductor { eta, k, roughness, specular_tint: ColorParam::Const(specular_tint), dist: Default::default() }
+            let specular_tint = match &d.specular_tint_texture {
+                Some(rel) => {
+                    let field = f("specular_tint_texture");
+                    let index = b.albedo_texture(&dir.join(rel), &field)?;
+                    // A tint above 1 would make the metal reflect more than arrives.
+                    if let Some(t) = b.textures[index as usize].texels.iter().find(|t| t.max_element() > 1.0) {
+                        return Err(check.err(&field, format!("{} has a texel {t} above 1; a reflectance tint lies in [0, 1]", rel)));
+                    }
+                    ColorParam::texture(index, tint)
+                }
+                None => ColorParam::Const(tint),
+            };
+            MaterialKind::Conductor { eta, k, roughness, specular_tint, dist: Default::default() }
         }
     };
     let emission = match d.emission {
