@@ -37,6 +37,9 @@ enum Command {
     /// Fit a trained model's guide gain (strengths × (N/2)^γ at N spp) on a dataset's
     /// validation shots and write the model with it; the tensors are unchanged.
     Calibrate(cli::calibrate::CalibrateArgs),
+    /// Pack a training checkpoint small enough to commit (exact weights, bf16 optimizer state),
+    /// or unpack one to continue the run on another machine.
+    Checkpoint(cli::checkpoint::CheckpointArgs),
     /// Denoise a frame written by `render --aovs` (G, P, both-buffers or guided model).
     Denoise(cli::denoise::DenoiseArgs),
     /// Regenerate docs/results.md: every method on the test scenes at each spp — error tables,
@@ -70,6 +73,7 @@ fn main() {
         Command::Reference(a) => cli::reference::run(a),
         Command::Train(a) => cli::train::run(a),
         Command::Calibrate(a) => cli::calibrate::run(a),
+        Command::Checkpoint(a) => cli::checkpoint::run(a),
         Command::Denoise(a) => cli::denoise::run(a),
         Command::Eval(a) => cli::eval::run(a),
         Command::PlotTraining(a) => cli::plot_training::run(a),

@@ -1,6 +1,7 @@
 pub mod bench;
 pub mod bench_mitsuba;
 pub mod calibrate;
+pub mod checkpoint;
 pub mod dataset;
 pub mod denoise;
 pub mod eval;

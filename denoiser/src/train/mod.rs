@@ -17,6 +17,7 @@ pub mod augment;
 pub mod calibrate;
 pub mod checkpoint;
 pub mod data;
+pub mod pack;
 pub mod patches;
 pub mod schedule;
 
