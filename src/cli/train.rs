@@ -153,6 +153,11 @@ pub struct TrainArgs {
     /// End this session after N steps with a checkpoint (continue later with --resume).
     #[arg(long)]
     pub stop_after: Option<usize>,
+    /// End this session after M minutes of wall time with a checkpoint, without cutting the
+    /// run short (continue later with --resume): a run planned over several sessions. Unlike
+    /// --minutes, which fits the whole run into a budget, the planned steps still run.
+    #[arg(long)]
+    pub session_minutes: Option<f64>,
     /// Use at most this many training shots.
     #[arg(long)]
     pub max_train_shots: Option<usize>,
@@ -390,6 +395,7 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
         checkpoint_every: a.checkpoint_every,
         minutes: a.minutes,
         pause_after: a.stop_after,
+        pause_after_minutes: a.session_minutes,
         metadata: metadata.clone(),
     };
 
@@ -497,7 +503,11 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
     let outcome = tr::run(data, &opts, model, Some(&ckpt), a.resume, &mut on_event)?;
     pb.finish_and_clear();
     if outcome.paused {
-        println!("stopped after {} steps as asked; checkpoint in {} (continue with --resume)", outcome.total_steps, ckpt.display());
+        println!(
+            "paused after {} steps (--stop-after or --session-minutes); checkpoint in {} (continue with --resume)",
+            outcome.total_steps,
+            ckpt.display()
+        );
         return Ok(());
     }
     if let Some(e) = log_err {

@@ -80,6 +80,10 @@ pub struct TrainOptions {
     /// End this session after this many steps (with a checkpoint), as if interrupted; a later
     /// `resume` continues. Not part of the run's identity.
     pub pause_after: Option<usize>,
+    /// End this session after this many minutes of its own wall time, likewise: a run planned
+    /// over several sessions keeps its schedule (its steps fix the learning-rate curve) and
+    /// pauses when a session's time is up. Not part of the run's identity.
+    pub pause_after_minutes: Option<f64>,
     /// Extra metadata written into weight files (provenance).
     pub metadata: BTreeMap<String, String>,
     /// The burn backend steps and validation run on. Not part of the run's identity: a
@@ -108,6 +112,7 @@ impl TrainOptions {
             checkpoint_every: 0,
             minutes: None,
             pause_after: None,
+            pause_after_minutes: None,
             metadata: BTreeMap::new(),
             backend: crate::Backend::Flex,
         }
@@ -172,7 +177,7 @@ pub struct Outcome {
     pub best_val: Option<f64>,
     pub total_steps: usize,
     pub seconds: f64,
-    /// The session ended at `pause_after`; resume to finish.
+    /// The session ended at `pause_after` or `pause_after_minutes`; resume to finish.
     pub paused: bool,
 }
 
@@ -535,7 +540,8 @@ pub fn run(
                 reason = "time budget";
                 break;
             }
-            if opts.pause_after.is_some_and(|p| session_steps >= p) {
+            let session_over = opts.pause_after_minutes.is_some_and(|m| started.elapsed().as_secs_f64() >= m * 60.0);
+            if opts.pause_after.is_some_and(|p| session_steps >= p) || session_over {
                 if let Some(c) = &ckpt {
                     st.elapsed = elapsed(&started);
                     save_checkpoint(c, &model, &optim, &mut st, &opts.metadata)?;

@@ -117,6 +117,7 @@ fn options(method: Method, ablation: Option<Ablation>, sched: &ScheduleOptions) 
         checkpoint_every: 2,
         minutes: None,
         pause_after: None,
+        pause_after_minutes: None,
         backend: Default::default(),
         metadata: BTreeMap::new(),
     }
@@ -469,4 +470,24 @@ fn packed_checkpoint_resumes_close_to_the_uninterrupted_run() {
     // Not a checkpoint folder: an error naming the file.
     let e = pack::pack(&tmpdir("pack-empty"), &tmpdir("pack-out")).unwrap_err().to_string();
     assert!(e.contains("model.safetensors"), "{e}");
+}
+
+/// A session's time limit pauses the run with a checkpoint instead of cutting its schedule:
+/// resumed, it takes every planned step and ends where an uninterrupted run ends.
+#[test]
+fn session_minutes_pause_without_cutting_the_schedule() {
+    let data = dataset();
+    let o = options(Method::G, None, &short());
+    let straight = train(&data, &o, None, false);
+    let dir = tmpdir("session-minutes");
+    let mut first = o.clone();
+    first.pause_after = Some(2);
+    assert!(train(&data, &first, Some(&dir), false).paused);
+    let mut timed_out = o.clone();
+    timed_out.pause_after_minutes = Some(0.0);
+    let paused = train(&data, &timed_out, Some(&dir), true);
+    assert!(paused.paused && paused.total_steps == 2, "{}", paused.total_steps);
+    let rest = train(&data, &o, Some(&dir), true);
+    assert_eq!(rest.total_steps, straight.total_steps);
+    assert_eq!(flat_values(&rest.model), flat_values(&straight.model));
 }
