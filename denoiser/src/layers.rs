@@ -148,6 +148,15 @@ pub fn sanitize<const D: usize>(x: Tensor<D>, limit: f32) -> Tensor<D> {
     x.mask_fill(nan, 0.0).clamp(-limit, limit)
 }
 
+/// [`sanitize`] of one value, for stages that run on the host (`infer::PathMlp`).
+pub fn sanitize_value(v: f32, limit: f32) -> f32 {
+    if v.is_nan() {
+        0.0
+    } else {
+        v.clamp(-limit, limit)
+    }
+}
+
 /// Centre crop of the last two (spatial) dimensions to `h × w`. An odd margin puts the extra
 /// pixel at the bottom/right, matching the kernel-apply op's offset.
 pub fn center_crop<const D: usize>(x: Tensor<D>, h: usize, w: usize) -> Tensor<D> {

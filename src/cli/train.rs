@@ -17,6 +17,13 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::Instant;
 
+/// `--lr-schedule`: the shape of the rate within a stage (`LrShape`).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LrSchedule {
+    Cosine,
+    Constant,
+}
+
 #[derive(Args, Clone)]
 pub struct TrainArgs {
     /// Dataset folder written by `pixguide dataset` (shots.jsonl, train/, val/).
@@ -131,8 +138,8 @@ pub struct TrainArgs {
     pub lr_scratch: Option<f64>,
     /// Learning-rate shape within each stage: cosine (linear warm-up over --warmup of the
     /// stage's steps from 1/10 of the rate, then cosine decay to 1/50) or constant (the paper's).
-    #[arg(long, default_value = "cosine", value_parser = ["cosine", "constant"])]
-    pub lr_schedule: String,
+    #[arg(long, value_enum, default_value_t = LrSchedule::Cosine)]
+    pub lr_schedule: LrSchedule,
     /// Warm-up fraction of each stage's steps (with --lr-schedule cosine).
     #[arg(long, default_value_t = 0.05)]
     pub warmup: f64,
@@ -205,7 +212,10 @@ fn schedule_options(a: &TrainArgs, config: &DenoiserConfig) -> ScheduleOptions {
     o.loss_scale = a.loss_scale;
     o.rel_l2_weight = a.rel_l2_weight;
     o.rel_l2_inside = a.rel_l2_inside;
-    o.lr_shape = if a.lr_schedule == "constant" { LrShape::Constant } else { LrShape::WarmupCosine { warmup: a.warmup } };
+    o.lr_shape = match a.lr_schedule {
+        LrSchedule::Constant => LrShape::Constant,
+        LrSchedule::Cosine => LrShape::WarmupCosine { warmup: a.warmup },
+    };
     o
 }
 

@@ -12,7 +12,7 @@
 
 use rayon::prelude::*;
 
-use crate::layers::{Conv, ConvStack, INPUT_LIMIT};
+use crate::layers::{sanitize_value, Conv, ConvStack, INPUT_LIMIT};
 use crate::pathnet::PathNet;
 use crate::preprocess::{PreparedImage, DESCRIPTOR_CHANNELS};
 
@@ -150,9 +150,7 @@ impl PathMlp {
                 let mut desc = vec![0.0; s * DESCRIPTOR_CHANNELS];
                 for i in 0..len {
                     for (k, d) in desc.iter_mut().enumerate() {
-                        // Same as `layers::sanitize`: NaN → 0, then clamped.
-                        let v = cols[k * len + i];
-                        *d = if v.is_nan() { 0.0 } else { v.clamp(-INPUT_LIMIT, INPUT_LIMIT) };
+                        *d = sanitize_value(cols[k * len + i], INPUT_LIMIT);
                     }
                     f(t * PIXELS_PER_TASK + i, &desc, &mut out[i * per_pixel..(i + 1) * per_pixel]);
                 }
