@@ -195,7 +195,7 @@ fn train_g_p_guided_and_resume() {
     assert_eq!(tensors(&base.join("all/g-default.safetensors")), tensors(&base.join("g3.safetensors")));
     // Stop after 2 steps, resume: same tensors as the straight G run above.
     let stopped = train(&["--method", "g", "-o", &out("g2.safetensors"), "--stop-after", "2"]);
-    assert!(stopped.starts_with("stopped after 2 steps"), "{stopped}");
+    assert!(stopped.starts_with("paused after 2 steps"), "{stopped}");
     assert!(!base.join("g2.safetensors").exists());
     train(&["--method", "g", "-o", &out("g2.safetensors"), "--resume"]);
     assert_eq!(tensors(&base.join("g2.safetensors")), tensors(&base.join("g.safetensors")));

@@ -9,7 +9,7 @@ use denoiser::method::Method;
 use denoiser::model::{DenoiserConfig, Preset};
 use denoiser::train::data::{Dataset, LoadOptions};
 use denoiser::train::patches::Sampling;
-use denoiser::train::schedule::{self, Ablation, FinetuneLoss, LossScale, LrShape, ScheduleOptions};
+use denoiser::train::schedule::{self, Ablation, BranchLoss, FinetuneLoss, LossScale, LrShape, ScheduleOptions};
 use denoiser::train::{self as tr, Event, TrainOptions};
 use denoiser::weights::{self, Provenance};
 use std::collections::BTreeMap;
@@ -209,9 +209,7 @@ fn schedule_options(a: &TrainArgs, config: &DenoiserConfig) -> ScheduleOptions {
     if let Some(l) = a.finetune_loss {
         o.finetune_loss = l;
     }
-    o.loss_scale = a.loss_scale;
-    o.rel_l2_weight = a.rel_l2_weight;
-    o.rel_l2_inside = a.rel_l2_inside;
+    o.loss = BranchLoss { loss_scale: a.loss_scale, rel_l2_weight: a.rel_l2_weight, rel_l2_inside: a.rel_l2_inside };
     o.lr_shape = match a.lr_schedule {
         LrSchedule::Constant => LrShape::Constant,
         LrSchedule::Cosine => LrShape::WarmupCosine { warmup: a.warmup },

@@ -296,7 +296,7 @@ impl NoisyColour {
     /// The first three channels of each branch's colour block (D or ln(1 + P), preprocess.rs),
     /// if `stage` scales its loss by them.
     pub fn for_stage(input: &crate::preprocess::InputTensors, stage: &Stage) -> Option<Self> {
-        stage.loss_scale.input_power().map(|_| NoisyColour {
+        stage.loss.loss_scale.input_power().map(|_| NoisyColour {
             diffuse: input.diffuse.colour.clone().narrow(1, 0, 3),
             specular: input.specular.colour.clone().narrow(1, 0, 3),
         })
@@ -311,20 +311,20 @@ pub fn stage_loss(out: MethodOutput, t: &TargetTensors, stage: &Stage, noisy: Op
         StageKind::FinetuneToneMapped => l1_tonemapped(out.radiance, t.total.clone()),
         StageKind::Branches | StageKind::Joint => {
             let (d, s) = (out.diffuse.output, out.specular.output);
-            let power = stage.loss_scale.input_power();
-            let inside = stage.rel_l2_inside && power.is_some();
-            let mut loss = match (stage.loss_scale, power, noisy) {
+            let power = stage.loss.loss_scale.input_power();
+            let inside = stage.loss.rel_l2_inside && power.is_some();
+            let mut loss = match (stage.loss.loss_scale, power, noisy) {
                 (LossScale::RelativeL2, ..) => rel_l2(d.clone(), t.diffuse.clone()) + rel_l2(s.clone(), t.specular.clone()),
                 (_, Some(power), Some(n)) => relative_to_input(
                     &[(d.clone(), n.diffuse, t.diffuse.clone()), (s.clone(), n.specular, t.specular.clone())],
                     power,
-                    if inside { stage.rel_l2_weight as f32 } else { 0.0 },
+                    if inside { stage.loss.rel_l2_weight as f32 } else { 0.0 },
                 ),
                 (_, Some(_), None) => panic!("a relative loss scale needs the noisy colour (NoisyColour::for_stage)"),
                 (_, None, _) => l1(d.clone(), t.diffuse.clone()) + l1(s.clone(), t.specular.clone()),
             };
-            if stage.rel_l2_weight > 0.0 && !inside {
-                loss = loss + (rel_l2(d, t.diffuse.clone()) + rel_l2(s, t.specular.clone())).mul_scalar(stage.rel_l2_weight);
+            if stage.loss.rel_l2_weight > 0.0 && !inside {
+                loss = loss + (rel_l2(d, t.diffuse.clone()) + rel_l2(s, t.specular.clone())).mul_scalar(stage.loss.rel_l2_weight);
             }
             if stage.w_path > 0.0 {
                 for (p, target) in [(out.diffuse.path, &t.diffuse), (out.specular.path, &t.specular)] {

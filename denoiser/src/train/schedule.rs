@@ -44,13 +44,21 @@ pub struct Stage {
     pub w_path: f64,
     /// How the rates vary over the stage's steps.
     pub shape: LrShape,
-    /// How each patch's branch or joint loss is scaled. Files and logs without the field mean
-    /// the paper's plain L1.
+    /// The branch or joint loss (its keys sit beside the stage's own in files and logs).
+    #[serde(flatten)]
+    pub loss: BranchLoss,
+}
+
+/// How each patch's branch or joint loss is formed. Files and logs without these keys mean the
+/// paper's plain L1.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BranchLoss {
+    /// How each patch's loss is scaled.
     #[serde(default)]
     pub loss_scale: LossScale,
-    /// Weight of a relative L2 term ([`crate::loss::rel_l2`]) added to the branch or joint
-    /// loss of any scale (0 = not computed): it pulls sparse inputs towards the conditional mean
-    /// where L1 settles for the darker median. Files and logs without the field mean 0.
+    /// Weight of a relative L2 term ([`crate::loss::rel_l2`]) added to the loss of any scale
+    /// (0 = not computed): it pulls sparse inputs towards the conditional mean where L1 settles
+    /// for the darker median.
     #[serde(default)]
     pub rel_l2_weight: f64,
     /// Whether that term is added to each patch's L1 before a relative scale divides it by the
@@ -75,17 +83,7 @@ impl Stage {
     /// A stage at constant rates with the paper's plain L1: what benchmarks, examples and
     /// tests of a single step use.
     pub fn constant(kind: StageKind, steps: usize, lr_rest: Option<f64>, lr_e: Option<f64>, w_path: f64) -> Self {
-        Stage {
-            kind,
-            steps,
-            lr_rest,
-            lr_e,
-            w_path,
-            shape: LrShape::Constant,
-            loss_scale: LossScale::Absolute,
-            rel_l2_weight: 0.0,
-            rel_l2_inside: false,
-        }
+        Stage { kind, steps, lr_rest, lr_e, w_path, shape: LrShape::Constant, loss: BranchLoss::default() }
     }
 
     /// Multiplier of the stage's rates at 0-based `step`.
@@ -186,15 +184,9 @@ pub struct ScheduleOptions {
     /// The finetune stage's loss.
     #[serde(default)]
     pub finetune_loss: FinetuneLoss,
-    /// How the branch and joint losses are scaled per patch.
-    #[serde(default)]
-    pub loss_scale: LossScale,
-    /// Weight of the relative L2 term added to the branch and joint losses ([`Stage::rel_l2_weight`]).
-    #[serde(default)]
-    pub rel_l2_weight: f64,
-    /// [`Stage::rel_l2_inside`].
-    #[serde(default)]
-    pub rel_l2_inside: bool,
+    /// The branch and joint losses.
+    #[serde(flatten)]
+    pub loss: BranchLoss,
 }
 
 impl Default for ScheduleOptions {
@@ -213,9 +205,7 @@ impl Default for ScheduleOptions {
             w_path: 0.1,
             lr_shape: LrShape::WarmupCosine { warmup: 0.05 },
             finetune_loss: FinetuneLoss::Linear,
-            loss_scale: LossScale::Absolute,
-            rel_l2_weight: 0.0,
-            rel_l2_inside: false,
+            loss: BranchLoss::default(),
         }
     }
 }
@@ -256,9 +246,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 lr_e: Some(o.lr_joint_e),
                 w_path: o.w_path,
                 shape: o.lr_shape,
-                loss_scale: o.loss_scale,
-                rel_l2_weight: o.rel_l2_weight,
-                rel_l2_inside: o.rel_l2_inside,
+                loss: o.loss,
             }]
         }
         (_, Some(Ablation::FixNTrain)) => {
@@ -270,9 +258,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 lr_e: Some(o.lr_joint_e),
                 w_path: 0.0,
                 shape: o.lr_shape,
-                loss_scale: o.loss_scale,
-                rel_l2_weight: o.rel_l2_weight,
-                rel_l2_inside: o.rel_l2_inside,
+                loss: o.loss,
             }]
         }
         (_, Some(Ablation::FullNFull)) => {
@@ -283,9 +269,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 lr_e: Some(o.lr_scratch),
                 w_path: o.w_path,
                 shape: o.lr_shape,
-                loss_scale: o.loss_scale,
-                rel_l2_weight: o.rel_l2_weight,
-                rel_l2_inside: o.rel_l2_inside,
+                loss: o.loss,
             }]
         }
         (m, _) => vec![
@@ -296,9 +280,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 lr_e: None,
                 w_path: path(m),
                 shape: o.lr_shape,
-                loss_scale: o.loss_scale,
-                rel_l2_weight: o.rel_l2_weight,
-                rel_l2_inside: o.rel_l2_inside,
+                loss: o.loss,
             },
             Stage {
                 kind: o.finetune_loss.stage_kind(),
@@ -307,10 +289,8 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 lr_e: None,
                 w_path: 0.0,
                 shape: o.lr_shape,
-                loss_scale: o.loss_scale,
-                // The finetune losses are on radiance and take no branch terms.
-                rel_l2_weight: 0.0,
-                rel_l2_inside: false,
+                // The finetune losses are on radiance and take no relative L2 term.
+                loss: BranchLoss { rel_l2_weight: 0.0, rel_l2_inside: false, ..o.loss },
             },
         ],
     }
@@ -335,9 +315,7 @@ mod tests {
             lr_e: None,
             w_path: 0.0,
             shape: LrShape::WarmupCosine { warmup: 0.05 },
-            loss_scale: LossScale::Absolute,
-            rel_l2_weight: 0.0,
-            rel_l2_inside: false,
+            loss: BranchLoss::default(),
         };
         assert!((s.lr_factor(0) - 0.1).abs() < 1e-12);
         assert!((s.lr_factor(10) - 1.0).abs() < 1e-12);

@@ -9,8 +9,8 @@ use data::Shot;
 use film::descriptors::{field, FIELDS};
 use film::{Descriptors, Frame, PixelBuffer};
 use patches::PatchSampler;
-use schedule::LossScale;
 use schedule::ScheduleOptions;
+use schedule::{BranchLoss, LossScale};
 
 fn tiny() -> DenoiserConfig {
     DenoiserConfig::new(
@@ -144,7 +144,10 @@ fn fit_fixed_batch(method: Method, w_path: f64, loss_scale: LossScale, rel_l2_we
     let o = options(method, None, &short());
     let dev = crate::cpu_training_device();
     let mut model = initial_model(&o, None, None, &dev).unwrap();
-    let stage = Stage { loss_scale, rel_l2_weight, ..Stage::constant(StageKind::Branches, 30, Some(1e-3), None, w_path) };
+    let stage = Stage {
+        loss: BranchLoss { loss_scale, rel_l2_weight, rel_l2_inside: false },
+        ..Stage::constant(StageKind::Branches, 30, Some(1e-3), None, w_path)
+    };
     let (refs, _) = draw_batch(&data, &o, 0, 0);
     let mut optim = optimizer();
     let mut losses = Vec::new();
