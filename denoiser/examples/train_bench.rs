@@ -69,7 +69,8 @@ fn main() {
             };
             let t0 = Instant::now();
             let (refs, mut rng) = draw_batch(&data, opts, 0, round);
-            let (input, target) = batch_tensors(&data.train, &refs, &data.spps, patch, opts.config.margin(), v.2.needs_descriptors(), &dev);
+            let (input, target) = batch_tensors(&data.train, &refs, &data.spps, patch, opts.config.margin(), v.2.needs_descriptors(), &dev)
+                .expect("reading the batch");
             let (m, _) = train_step(model.take().unwrap(), optim, input, &target, st, 1.0, &e_ids, &mut rng).unwrap();
             *model = Some(m);
             if round > 0 {

@@ -70,6 +70,11 @@ impl DescriptorFile {
         })
     }
 
+    /// Another handle on the same open file.
+    pub fn try_clone(&self) -> Result<DescriptorFile> {
+        Ok(DescriptorFile { path: self.path.clone(), file: self.file.try_clone().map_err(|e| Error::io(&self.path, e))?, ..*self })
+    }
+
     /// The first `s` records of pixel `i` (row-major), as f32, into `out` (`s × FIELDS` values).
     pub fn read_prefix(&self, i: usize, s: usize, out: &mut [f32]) -> Result<()> {
         let (pixels, spp) = (self.width as usize * self.height as usize, self.spp as usize);

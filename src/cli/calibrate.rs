@@ -69,7 +69,7 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
         let line = format!("γ {g:<6} validation {:.5}  ({})", v.overall, by.join(", "));
         bar.suspend(|| eprintln!("{line}"));
         bar.inc(1);
-    })
+    })?
     .context("no validation shots in the dataset")?;
     bar.finish_and_clear();
     let best = cal.best;

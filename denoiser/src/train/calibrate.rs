@@ -7,7 +7,7 @@
 //! score, so it can only pick a γ that training's own criterion prefers.
 
 use super::data::Dataset;
-use super::{validate_by_spp, TrainOptions, Validation};
+use super::{validate_by_spp, TrainError, TrainOptions, Validation};
 use crate::method::MethodModel;
 
 /// The candidates `pixguide calibrate` tries by default: 0 (no gain, the weights as trained) to
@@ -27,7 +27,8 @@ pub struct Calibration {
 }
 
 /// Scores `model` on the validation shots of `data` with each exponent in turn (`progress`
-/// hears each result as it comes). `None` without validation shots or candidates. The model is
+/// hears each result as it comes). `None` without validation shots or candidates; an error if a
+/// shot's descriptors cannot be read. The model is
 /// left with the best exponent set.
 pub fn calibrate_guide_gain(
     model: &mut MethodModel,
@@ -35,19 +36,21 @@ pub fn calibrate_guide_gain(
     opts: &TrainOptions,
     exponents: &[f64],
     progress: &mut dyn FnMut(f64, &Validation),
-) -> Option<Calibration> {
+) -> Result<Option<Calibration>, TrainError> {
     let mut tried = Vec::with_capacity(exponents.len());
     for &g in exponents {
         model.set_guide_gain_exponent(g);
-        let v = validate_by_spp(model, data, opts)?;
+        let Some(v) = validate_by_spp(model, data, opts)? else { return Ok(None) };
         progress(g, &v);
         tried.push((g, v));
     }
-    let best = tried.iter().fold(None::<&(f64, Validation)>, |b, t| match b {
+    let Some(best) = tried.iter().fold(None::<&(f64, Validation)>, |b, t| match b {
         Some(b) if b.1.overall <= t.1.overall => Some(b),
         _ => Some(t),
-    })?;
+    }) else {
+        return Ok(None);
+    };
     let best = best.0;
     model.set_guide_gain_exponent(best);
-    Some(Calibration { tried, best })
+    Ok(Some(Calibration { tried, best }))
 }

@@ -231,43 +231,77 @@ pub struct PatchRef {
     pub t: Dihedral,
 }
 
-/// The first `spp` samples of a descriptor file, normalised as [`crate::preprocess::prepare`]
-/// normalises them in memory (the same values, bit for bit).
-pub struct FileColumns<'a> {
-    pub file: &'a DescriptorFile,
-    pub spp: usize,
+/// The normalised descriptors (the first `spp` samples) of the `p × p` region at (x, y) of a
+/// `width`-wide image, read from its file: the values [`crate::preprocess::prepare`] puts in
+/// its planes, bit for bit, for the pixels a patch cut there reads.
+pub struct Region {
+    /// `[spp, 36, p·p]`.
+    data: Vec<f32>,
+    x: usize,
+    y: usize,
+    p: usize,
+    width: usize,
+    spp: usize,
 }
 
-impl DescriptorSource for FileColumns<'_> {
-    fn columns(&self, pixels: &[usize]) -> Vec<f32> {
-        let (len, s) = (pixels.len(), self.spp);
-        let mut out = vec![0.0f32; s * DESCRIPTOR_CHANNELS * len];
-        let mut rec = vec![0.0f32; s * FIELDS];
-        for (j, &i) in pixels.iter().enumerate() {
-            // The file was checked at open and the index lies in the image, so a failure here
-            // is the disk failing under a running training: nothing sensible goes on from it.
-            if let Err(e) = self.file.read_prefix(i, s, &mut rec) {
-                panic!("reading descriptors for training: {e}");
-            }
-            for (k, r) in rec.chunks_exact(FIELDS).enumerate() {
-                for (c, &v) in r[..DESCRIPTOR_CHANNELS].iter().enumerate() {
-                    out[(k * DESCRIPTOR_CHANNELS + c) * len + j] = finite(normalise_descriptor(c, v));
+impl Region {
+    pub fn read(file: &DescriptorFile, spp: usize, x: usize, y: usize, p: usize, width: usize) -> Result<Region, film::Error> {
+        let n = p * p;
+        let mut data = vec![0.0f32; spp * DESCRIPTOR_CHANNELS * n];
+        let mut rec = vec![0.0f32; spp * FIELDS];
+        for row in 0..p {
+            for col in 0..p {
+                file.read_prefix((y + row) * width + x + col, spp, &mut rec)?;
+                let j = row * p + col;
+                for (k, r) in rec.chunks_exact(FIELDS).enumerate() {
+                    for (c, &v) in r[..DESCRIPTOR_CHANNELS].iter().enumerate() {
+                        data[(k * DESCRIPTOR_CHANNELS + c) * n + j] = finite(normalise_descriptor(c, v));
+                    }
                 }
             }
         }
-        out
+        Ok(Region { data, x, y, p, width, spp })
+    }
+}
+
+impl DescriptorSource for Region {
+    fn columns(&self, pixels: &[usize]) -> Vec<f32> {
+        let local: Vec<usize> = pixels
+            .iter()
+            .map(|&i| {
+                let (ix, iy) = (i % self.width, i / self.width);
+                assert!((self.x..self.x + self.p).contains(&ix) && (self.y..self.y + self.p).contains(&iy), "pixel {i} outside the region");
+                (iy - self.y) * self.p + ix - self.x
+            })
+            .collect();
+        let n = self.p * self.p;
+        (0..self.spp * DESCRIPTOR_CHANNELS).flat_map(|plane| local.iter().map(move |&j| self.data[plane * n + j])).collect()
     }
 }
 
 /// Cuts a patch: inputs (with the first S descriptor samples if the model needs them) and the
 /// target cropped to the output (`margin` less on each side), both moved by `r.t`.
-pub fn cut(shot: &Shot, r: &PatchRef, spp: usize, patch: usize, margin: usize, with_descriptors: bool) -> (PreparedImage, PreparedTarget) {
+/// Fails only if the shot's descriptor file cannot be read any more.
+pub fn cut(
+    shot: &Shot,
+    r: &PatchRef,
+    spp: usize,
+    patch: usize,
+    margin: usize,
+    with_descriptors: bool,
+) -> Result<(PreparedImage, PreparedTarget), TrainError> {
     let img = &shot.images[r.spp];
-    let source = shot.descriptors.as_ref().filter(|_| with_descriptors).map(|file| FileColumns { file, spp });
-    let crop = augment::cut_image(img, source.as_ref().map(|s| s as &dyn DescriptorSource), r.x, r.y, patch, r.t);
+    let region = match shot.descriptors.as_ref().filter(|_| with_descriptors) {
+        Some(file) => Some(
+            Region::read(file, spp, r.x, r.y, patch, img.width)
+                .map_err(|e| TrainError::Data(format!("{} (shot {}): {e}", "descriptors", shot.name)))?,
+        ),
+        None => None,
+    };
+    let crop = augment::cut_image(img, region.as_ref().map(|s| s as &dyn DescriptorSource), r.x, r.y, patch, r.t);
     let o = patch - 2 * margin;
     let t = augment::cut_target(&shot.target, r.x + margin, r.y + margin, o, r.t);
-    (crop, t)
+    Ok((crop, t))
 }
 
 /// Tensors of a batch.
@@ -279,13 +313,13 @@ pub fn batch_tensors(
     margin: usize,
     with_descriptors: bool,
     device: &Device,
-) -> (InputTensors, TargetTensors) {
+) -> Result<(InputTensors, TargetTensors), TrainError> {
     // In parallel: a P-buffer patch reads and normalises its descriptors (up to 64 × 36 values
     // a pixel). The order of the batch is the order of `refs` whatever the thread count.
     use rayon::prelude::*;
     let cuts: Vec<(PreparedImage, PreparedTarget)> =
-        refs.par_iter().map(|r| cut(&shots[r.shot], r, spps[r.spp], patch, margin, with_descriptors)).collect();
+        refs.par_iter().map(|r| cut(&shots[r.shot], r, spps[r.spp], patch, margin, with_descriptors)).collect::<Result<_, _>>()?;
     let imgs: Vec<&PreparedImage> = cuts.iter().map(|c| &c.0).collect();
     let tgts: Vec<&PreparedTarget> = cuts.iter().map(|c| &c.1).collect();
-    (PreparedImage::to_tensors(&imgs, device), PreparedTarget::to_tensors(&tgts, device))
+    Ok((PreparedImage::to_tensors(&imgs, device), PreparedTarget::to_tensors(&tgts, device)))
 }

@@ -408,8 +408,8 @@ pub fn optimizer() -> ModuleOptimizer {
 /// The test relMSE ([`rel_mse_test`], what `pixguide eval` reports) over the fixed validation
 /// grid of every val shot at every spp, mean over patches. The paper validates on linear
 /// relMSE_val (method.md §7.3); on our short runs that chose checkpoints full of fireflies. `None` without validation shots.
-pub fn validate(model: &MethodModel, data: &Dataset, opts: &TrainOptions) -> Option<f64> {
-    validate_by_spp(model, data, opts).map(|v| v.overall)
+pub fn validate(model: &MethodModel, data: &Dataset, opts: &TrainOptions) -> Result<Option<f64>, TrainError> {
+    Ok(validate_by_spp(model, data, opts)?.map(|v| v.overall))
 }
 
 /// [`validate`]'s score, and the same mean at each of the dataset's sample counts.
@@ -421,9 +421,9 @@ pub struct Validation {
 }
 
 /// [`validate`] with the mean at each sample count as well.
-pub fn validate_by_spp(model: &MethodModel, data: &Dataset, opts: &TrainOptions) -> Option<Validation> {
+pub fn validate_by_spp(model: &MethodModel, data: &Dataset, opts: &TrainOptions) -> Result<Option<Validation>, TrainError> {
     if data.val.is_empty() {
-        return None;
+        return Ok(None);
     }
     let m = model.valid();
     let dev = opts.backend.device().expect("run() checked the backend");
@@ -448,7 +448,7 @@ pub fn validate_by_spp(model: &MethodModel, data: &Dataset, opts: &TrainOptions)
             j += 1;
         }
         let chunk = &refs[i..j];
-        let (input, target) = batch_tensors(&data.val, chunk, &data.spps, opts.patch, margin, with_desc, &dev);
+        let (input, target) = batch_tensors(&data.val, chunk, &data.spps, opts.patch, margin, with_desc, &dev)?;
         let out = m.forward(input);
         let v: f32 = rel_mse_test(out.radiance, target.total).into_scalar();
         sum += v as f64 * chunk.len() as f64;
@@ -458,7 +458,7 @@ pub fn validate_by_spp(model: &MethodModel, data: &Dataset, opts: &TrainOptions)
         s.1 += chunk.len();
         i = j;
     }
-    Some(Validation { overall: sum / n as f64, by_spp: per_spp.into_iter().map(|(s, k)| s / k.max(1) as f64).collect() })
+    Ok(Some(Validation { overall: sum / n as f64, by_spp: per_spp.into_iter().map(|(s, k)| s / k.max(1) as f64).collect() }))
 }
 
 /// Runs the schedule from `model` (or from the checkpoint in `ckpt_dir` when `resume` and one
@@ -559,7 +559,7 @@ pub fn run(
             session_steps += 1;
             let t0 = Instant::now();
             let (refs, mut rng) = draw_batch(data, opts, k, st.step);
-            let (input, target) = batch_tensors(&data.train, &refs, &data.spps, opts.patch, margin, with_desc, &device);
+            let (input, target) = batch_tensors(&data.train, &refs, &data.spps, opts.patch, margin, with_desc, &device)?;
             let (m, loss) = match train_step(model, &mut optim, input, &target, stage, stage.lr_factor(st.step), &e_params, &mut rng) {
                 Ok(r) => r,
                 Err(loss) => {
@@ -588,7 +588,7 @@ pub fn run(
             // would be thrown away.
             let out_of_time = deadline.is_some_and(|d| elapsed(&started) >= d);
             if st.step.is_multiple_of(val_every) || st.step == stage.steps || out_of_time {
-                if let Some(v) = validate(&model, data, opts) {
+                if let Some(v) = validate(&model, data, opts)? {
                     let best = st.best_val.is_none_or(|b| v < b);
                     if best {
                         st.best_val = Some(v);

@@ -152,7 +152,7 @@ fn fit_fixed_batch(method: Method, w_path: f64, loss_scale: LossScale, rel_l2_we
     let mut optim = optimizer();
     let mut losses = Vec::new();
     for step in 0..30 {
-        let (input, target) = batch_tensors(&data.train, &refs, &data.spps, PATCH, o.config.margin(), true, &dev);
+        let (input, target) = batch_tensors(&data.train, &refs, &data.spps, PATCH, o.config.margin(), true, &dev).unwrap();
         let mut rng = SplitMix64::new(step);
         let (m, loss) = train_step(model, &mut optim, input, &target, &stage, 1.0, &[], &mut rng).unwrap();
         model = m;
@@ -395,13 +395,13 @@ fn calibration_scores_each_exponent_and_keeps_the_lowest() {
     let mut o = options(Method::G, None, &short());
     o.config = tiny().with_mskp(Some(unet));
     let mut model = MethodModel::init(&o.config, Method::G, &o.backend.training_device().unwrap());
-    let plain = validate(&model, &data, &o).unwrap();
-    let by = validate_by_spp(&model, &data, &o).unwrap();
+    let plain = validate(&model, &data, &o).unwrap().unwrap();
+    let by = validate_by_spp(&model, &data, &o).unwrap().unwrap();
     assert_eq!(by.overall, plain);
     assert!((by.by_spp.iter().sum::<f64>() / by.by_spp.len() as f64 - plain).abs() < 1e-9 * plain, "{by:?} against {plain}");
     let exps = [0.0, 2.0, 4.0];
     let mut heard = Vec::new();
-    let cal = calibrate::calibrate_guide_gain(&mut model, &data, &o, &exps, &mut |g, _| heard.push(g)).unwrap();
+    let cal = calibrate::calibrate_guide_gain(&mut model, &data, &o, &exps, &mut |g, _| heard.push(g)).unwrap().unwrap();
     assert_eq!(heard, exps);
     assert_eq!(cal.tried[0].1, by, "γ = 0 is the model as it was");
     let at2: Vec<f64> = cal.tried.iter().map(|t| t.1.by_spp[0]).collect();
@@ -429,9 +429,11 @@ fn descriptors_read_from_their_file_equal_the_planes_in_memory() {
         let whole = Descriptors::read_safetensors(&path).unwrap();
         let file = film::DescriptorFile::open(&path).unwrap();
         let _ = std::fs::remove_file(&path);
-        let pixels: Vec<usize> = vec![34, 0, 7, 7, 12, 33];
+        // Pixels of the 3×3 region at (2, 1) of the 7-wide image, in any order and repeated.
+        let pixels: Vec<usize> = vec![23, 9, 11, 11, 16, 10, 25];
         for s in [1, 3, 8] {
-            let from_file = augment::DescriptorSource::columns(&data::FileColumns { file: &file, spp: s }, &pixels);
+            let region = data::Region::read(&file, s, 2, 1, 3, 7).unwrap();
+            let from_file = augment::DescriptorSource::columns(&region, &pixels);
             let in_memory = crate::preprocess::normalised_columns(&whole, s, &pixels);
             assert_eq!(from_file, in_memory, "{precision:?}, {s} spp");
             assert!(from_file.iter().all(|v| v.is_finite()));
@@ -493,4 +495,27 @@ fn session_minutes_pause_without_cutting_the_schedule() {
     let rest = train(&data, &o, Some(&dir), true);
     assert_eq!(rest.total_steps, straight.total_steps);
     assert_eq!(flat_values(&rest.model), flat_values(&straight.model));
+}
+
+/// A descriptor file that goes bad under a running training (here: truncated after it was
+/// opened) ends the run with an error naming the shot, not a panic.
+#[test]
+fn unreadable_descriptors_are_an_error_naming_the_shot() {
+    let mut data = dataset();
+    let path = std::env::temp_dir().join(format!("pixguide-train-truncated-{}.safetensors", std::process::id()));
+    let d = Descriptors::new(W as u32, W as u32, 4);
+    d.write_safetensors(&path).unwrap();
+    let file = film::DescriptorFile::open(&path).unwrap();
+    std::fs::OpenOptions::new().write(true).open(&path).unwrap().set_len(200).unwrap();
+    for s in data.train.iter_mut() {
+        s.descriptors = Some(file.try_clone().unwrap());
+    }
+    let _ = std::fs::remove_file(&path);
+    let o = options(Method::P, None, &short());
+    let m = initial_model(&o, None, None, &crate::cpu_training_device()).unwrap();
+    match run(&data, &o, m, None, false, &mut |_| {}) {
+        Err(TrainError::Data(e)) => assert!(e.contains("train/s"), "{e}"),
+        Err(e) => panic!("{e}"),
+        Ok(_) => panic!("trained on a truncated file"),
+    }
 }
