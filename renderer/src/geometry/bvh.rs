@@ -1,5 +1,7 @@
 //! The ray-query BVH: obvhs builds a binary BVH (PLOC, then reinsertion optimisation), which is
-//! collapsed here into an 8-wide BVH of our own layout — float child boxes in
+//! collapsed here (surface-area-optimal, by dynamic programming as in Ylitie et al. 2017,
+//! "Efficient incoherent ray traversal on GPUs through compressed wide BVHs") into an 8-wide
+//! BVH of our own layout — float child boxes in
 //! structure-of-arrays form, tested four children at a time — whose leaves (up to 16 triangles,
 //! chosen by the surface area heuristic) are blocks of four triangles stored side by side and
 //! tested together (`Tri4`). Traversal visits children nearest first, prefetches the ones it
@@ -32,11 +34,12 @@ const W: usize = 8;
 const G: usize = W / 4;
 /// Largest leaf the surface-area heuristic may choose (four `Tri4` blocks).
 const LEAF_CAP: u32 = 16;
-/// Surface-area-heuristic cost of a node visit relative to one `Tri4` test. Measured (2026-11-23,
-/// displaced sphere and Cornell box): 0.5 leaves too many small leaves (more node visits, each
-/// a likely cache miss on a 100k-triangle mesh), 2 too few (a Cornell-box ray then tests 5+
-/// blocks); 1 was best or tied on both.
-const C_NODE: f32 = 1.0;
+/// Surface-area-heuristic cost of a node visit relative to one `Tri4` test, for the optimal
+/// wide collapse. Measured on the displaced sphere (`examples/bvh_ab.rs`, docs/performance.md):
+/// 1 gives many one-block leaves (38k leaves, nodes 6.9 of 8 full, 7.9 node visits per random
+/// ray); 3–4 give fuller leaves and fewer nodes (3.4k, 7.3 visits) and trace ~10% faster; the
+/// Cornell box is one node from 2 on, as fast as before.
+pub const C_NODE: f32 = 3.0;
 /// Most `Tri4` blocks in one leaf (the block count has 4 bits in a child reference).
 const LEAF_BLOCKS_MAX: usize = 16;
 /// Child reference: bit 31 set for a leaf, whose bits 27..31 hold the block count − 1 and bits
@@ -127,10 +130,54 @@ impl RayData {
 /// Hit record inside the traversal: t, original triangle index, b1, b2.
 type HitRec = (f32, u32, f32, f32);
 
+/// What a traversal did, for statistics (`Bvh::intersect_counted`); the benchmark traversal
+/// uses `NoProbe`, which compiles to nothing.
+trait Probe {
+    fn node(&mut self);
+    fn block(&mut self);
+}
+
+struct NoProbe;
+
+impl Probe for NoProbe {
+    #[inline(always)]
+    fn node(&mut self) {}
+    #[inline(always)]
+    fn block(&mut self) {}
+}
+
+/// Node visits and `Tri4` block tests summed over the rays counted.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TraversalCounts {
+    pub rays: u64,
+    pub nodes: u64,
+    pub blocks: u64,
+}
+
+impl Probe for TraversalCounts {
+    fn node(&mut self) {
+        self.nodes += 1;
+    }
+    fn block(&mut self) {
+        self.blocks += 1;
+    }
+}
+
+/// Shape of the wide BVH.
+#[derive(Clone, Copy, Debug)]
+pub struct BvhShape {
+    pub nodes: usize,
+    /// Children (inner and leaf) per node, on average, of `W`.
+    pub avg_fill: f64,
+    pub leaves: usize,
+    pub blocks: usize,
+}
+
 impl Bvh {
     /// `valid` lists the triangles to put in the BVH (the non-degenerate ones); `tris` are
-    /// their vertices, indexed like `valid`.
-    pub fn build(tris: Vec<[Vec3; 3]>, valid: Vec<u32>, params: BvhBuildParams) -> Bvh {
+    /// their vertices, indexed like `valid`. `c_node` is the surface-area-heuristic cost of a
+    /// node visit relative to a `Tri4` test (`C_NODE` unless tuning).
+    pub fn build(tris: Vec<[Vec3; 3]>, valid: Vec<u32>, params: BvhBuildParams, c_node: f32) -> Bvh {
         debug_assert_eq!(tris.len(), valid.len());
         if tris.is_empty() {
             return Bvh { nodes: Vec::new(), blocks: Vec::new(), stack_need: 0 };
@@ -162,11 +209,33 @@ impl Bvh {
             )
         };
         ReinsertionOptimizer::default().run(&mut bvh2, params.reinsertion_batch_ratio, None);
-        Collapser::new(&bvh2, &tris, &valid).run()
+        Collapser::new(&bvh2, &tris, &valid, c_node).run()
     }
 
     pub fn node_count(&self) -> usize {
         self.nodes.len()
+    }
+
+    pub fn shape(&self) -> BvhShape {
+        let children = self.nodes.iter().flat_map(|n| n.child).filter(|&c| c != u32::MAX);
+        let (mut filled, mut leaves) = (0, 0);
+        for c in children {
+            filled += 1;
+            leaves += (c & LEAF_BIT != 0) as usize;
+        }
+        BvhShape { nodes: self.nodes.len(), avg_fill: filled as f64 / self.nodes.len().max(1) as f64, leaves, blocks: self.blocks.len() }
+    }
+
+    /// `intersect`, counting node visits and block tests into `counts`.
+    pub fn intersect_counted(&self, o: Vec3, d: Vec3, tmax: f32, counts: &mut TraversalCounts) -> Option<(f32, u32, f32, f32)> {
+        counts.rays += 1;
+        if self.nodes.is_empty() || !(tmax > 0.0) {
+            return None;
+        }
+        let r = RayData::new(o, d)?;
+        let mut best = None;
+        self.with_stack(|stack| self.traverse::<false, _>(&r, tmax, &mut best, stack, counts));
+        best
     }
 
     /// Closest hit with t in (0, tmax): (t, original triangle index, b1, b2).
@@ -177,7 +246,7 @@ impl Bvh {
         }
         let r = RayData::new(o, d)?;
         let mut best = None;
-        self.with_stack(|stack| self.traverse::<false>(&r, tmax, &mut best, stack));
+        self.with_stack(|stack| self.traverse::<false, _>(&r, tmax, &mut best, stack, &mut NoProbe));
         best
     }
 
@@ -189,7 +258,7 @@ impl Bvh {
         }
         let Some(r) = RayData::new(o, d) else { return false };
         let mut best = None;
-        self.with_stack(|stack| self.traverse::<true>(&r, tmax, &mut best, stack));
+        self.with_stack(|stack| self.traverse::<true, _>(&r, tmax, &mut best, stack, &mut NoProbe));
         best.is_some()
     }
 
@@ -207,12 +276,20 @@ impl Bvh {
     /// Closest hit (or, with `ANY`, the first hit found) in (0, tmax), into `best`.
     /// `stack` holds at least `stack_need` entries.
     #[inline(always)]
-    fn traverse<const ANY: bool>(&self, r: &RayData, mut tmax: f32, best: &mut Option<HitRec>, stack: &mut [MaybeUninit<(u32, f32)>]) {
+    fn traverse<const ANY: bool, P: Probe>(
+        &self,
+        r: &RayData,
+        mut tmax: f32,
+        best: &mut Option<HitRec>,
+        stack: &mut [MaybeUninit<(u32, f32)>],
+        probe: &mut P,
+    ) {
         let mut sp = 0usize;
         let mut cur = 0u32;
         loop {
             if cur & LEAF_BIT == 0 {
                 let node = &self.nodes[cur as usize];
+                probe.node();
                 let (mask, tnear) = node_test(node, r, tmax);
                 if mask != 0 {
                     let first = mask.trailing_zeros() as usize;
@@ -255,6 +332,7 @@ impl Bvh {
                 let first = (cur & ((1 << BLOCK_BITS) - 1)) as usize;
                 let n = ((cur & !LEAF_BIT) >> BLOCK_BITS) as usize + 1;
                 for blk in &self.blocks[first..first + n] {
+                    probe.block();
                     if let Some(h) = tri4_test(blk, r, tmax) {
                         tmax = h.0;
                         *best = Some(h);
@@ -405,13 +483,28 @@ fn tri4_scalar(blk: &Tri4, r: &RayData, mut tmax: f32) -> Option<HitRec> {
     best
 }
 
+/// How a binary subtree is laid out in a given number of slots of a wide node.
+#[derive(Clone, Copy)]
+enum Pick {
+    /// One slot: a leaf with all its triangles.
+    Leaf,
+    /// One slot: a wide node of its own.
+    Inner,
+    /// The children share the slots, this many to the left one.
+    Split(u8),
+    /// One slot fewer does as well.
+    Fewer,
+}
+
 /// Turns obvhs's binary BVH into our 8-wide one.
 struct Collapser<'a> {
     bvh2: &'a Bvh2,
     tris: &'a [[Vec3; 3]],
     valid: &'a [u32],
-    /// Whether each binary subtree becomes one leaf (surface area heuristic).
-    leaf: Vec<bool>,
+    /// Per binary node and slot budget (1..=W, index − 1): how its subtree is best laid out.
+    pick: Vec<[Pick; W]>,
+    /// Per binary node that becomes a wide node: slots of the W given to its left child.
+    inner_split: Vec<u8>,
     nodes: Vec<Node>,
     blocks: Vec<Tri4>,
     /// Deepest chain of nodes made by `split_leaf` (extra traversal depth below a leaf).
@@ -419,9 +512,9 @@ struct Collapser<'a> {
 }
 
 impl<'a> Collapser<'a> {
-    fn new(bvh2: &'a Bvh2, tris: &'a [[Vec3; 3]], valid: &'a [u32]) -> Collapser<'a> {
+    fn new(bvh2: &'a Bvh2, tris: &'a [[Vec3; 3]], valid: &'a [u32], c_node: f32) -> Collapser<'a> {
         let n2 = &bvh2.nodes;
-        // Preorder with an explicit stack (a degenerate build may be deep), then counts bottom-up.
+        // Preorder with an explicit stack (a degenerate build may be deep), then costs bottom-up.
         let mut order = Vec::with_capacity(n2.len());
         let mut st = vec![0u32];
         while let Some(i) = st.pop() {
@@ -432,30 +525,58 @@ impl<'a> Collapser<'a> {
             }
         }
         let mut count = vec![0u32; n2.len()];
-        let mut cost = vec![0f32; n2.len()];
-        let mut leaf = vec![false; n2.len()];
+        let mut cost = vec![[0f32; W]; n2.len()];
+        let mut pick = vec![[Pick::Leaf; W]; n2.len()];
+        let mut inner_split = vec![0u8; n2.len()];
         for &i in order.iter().rev() {
             let nd = &n2[i as usize];
             let area = nd.aabb.half_area();
             let i = i as usize;
             if nd.prim_count > 0 {
                 count[i] = nd.prim_count;
-                leaf[i] = true;
-                cost[i] = area * nd.prim_count.div_ceil(4) as f32;
-            } else {
-                let (l, r) = (nd.first_index as usize, nd.first_index as usize + 1);
-                count[i] = count[l] + count[r];
-                let inner = area * C_NODE + cost[l] + cost[r];
-                let as_leaf = area * count[i].div_ceil(4) as f32;
-                leaf[i] = count[i] <= LEAF_CAP && as_leaf <= inner;
-                cost[i] = if leaf[i] { as_leaf } else { inner };
+                cost[i] = [area * nd.prim_count.div_ceil(4) as f32; W];
+                continue;
+            }
+            let (l, r) = (nd.first_index as usize, nd.first_index as usize + 1);
+            count[i] = count[l] + count[r];
+            let as_leaf = if count[i] <= LEAF_CAP { area * count[i].div_ceil(4) as f32 } else { f32::INFINITY };
+            // Cheapest way to spread the subtree over j slots, j = 2..=W: k to the left child.
+            let mut dist = [(f32::INFINITY, 0u8); W + 1];
+            for (j, d) in dist.iter_mut().enumerate().skip(2) {
+                for k in 1..j {
+                    let c = cost[l][k - 1] + cost[r][j - k - 1];
+                    if c < d.0 {
+                        *d = (c, k as u8);
+                    }
+                }
+            }
+            let inner = area * c_node + dist[W].0;
+            inner_split[i] = dist[W].1;
+            (cost[i][0], pick[i][0]) = if as_leaf <= inner { (as_leaf, Pick::Leaf) } else { (inner, Pick::Inner) };
+            for j in 2..=W {
+                (cost[i][j - 1], pick[i][j - 1]) =
+                    if dist[j].0 < cost[i][j - 2] { (dist[j].0, Pick::Split(dist[j].1)) } else { (cost[i][j - 2], Pick::Fewer) };
             }
         }
-        Collapser { bvh2, tris, valid, leaf, nodes: Vec::new(), blocks: Vec::new(), split_depth: 0 }
+        Collapser { bvh2, tris, valid, pick, inner_split, nodes: Vec::new(), blocks: Vec::new(), split_depth: 0 }
+    }
+
+    /// Appends to `out` the binary nodes that represent the subtree under `n` in at most
+    /// `slots` children of a wide node (the optimum found by `new`).
+    fn collect(&self, n: u32, slots: usize, out: &mut Vec<u32>) {
+        match self.pick[n as usize][slots - 1] {
+            Pick::Leaf | Pick::Inner => out.push(n),
+            Pick::Fewer => self.collect(n, slots - 1, out),
+            Pick::Split(k) => {
+                let f = self.bvh2.nodes[n as usize].first_index;
+                self.collect(f, k as usize, out);
+                self.collect(f + 1, slots - k as usize, out);
+            }
+        }
     }
 
     fn is_leaf(&self, i: u32) -> bool {
-        self.leaf[i as usize]
+        matches!(self.pick[i as usize][0], Pick::Leaf)
     }
 
     fn run(mut self) -> Bvh {
@@ -473,17 +594,10 @@ impl<'a> Collapser<'a> {
         while let Some((i2, wi, depth)) = work.pop() {
             max_depth = max_depth.max(depth);
             let nd = &self.bvh2.nodes[i2 as usize];
-            let mut kids = vec![nd.first_index, nd.first_index + 1];
-            // Open the largest openable child until the node is full (greedy surface area).
-            while kids.len() < W {
-                let best = kids.iter().enumerate().filter(|(_, &k)| !self.is_leaf(k)).max_by(|a, b| {
-                    self.bvh2.nodes[*a.1 as usize].aabb.half_area().total_cmp(&self.bvh2.nodes[*b.1 as usize].aabb.half_area())
-                });
-                let Some((j, &k)) = best else { break };
-                let f = self.bvh2.nodes[k as usize].first_index;
-                kids[j] = f;
-                kids.push(f + 1);
-            }
+            let mut kids = Vec::with_capacity(W);
+            let k = self.inner_split[i2 as usize] as usize;
+            self.collect(nd.first_index, k, &mut kids);
+            self.collect(nd.first_index + 1, W - k, &mut kids);
             for (slot, &k) in kids.iter().enumerate() {
                 let aabb = self.bvh2.nodes[k as usize].aabb;
                 let c = if self.is_leaf(k) {
@@ -588,7 +702,7 @@ mod tests {
             tris.push([Vec3::new(-s, -s, s * 0.1), Vec3::new(s, -s, s * 0.2), Vec3::new(0.0, s, s * 0.3)]);
         }
         let valid: Vec<u32> = (0..tris.len() as u32).collect();
-        let bvh = Bvh::build(tris.clone(), valid, default_build_params());
+        let bvh = Bvh::build(tris.clone(), valid, default_build_params(), C_NODE);
         let mut heap = Bvh { nodes: bvh.nodes.clone(), blocks: bvh.blocks.clone(), stack_need: STACK + 1 };
         heap.stack_need = heap.stack_need.max(bvh.stack_need);
         let mut rng = crate::rng::Pcg32::new(5, 0);
