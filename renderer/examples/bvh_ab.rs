@@ -1,7 +1,8 @@
 //! A/B of BVH variants in one process, single-thread, interleaved run by run (best and median
 //! of `REPS` runs, per CPU second of the tracing thread), with node visits and block tests per
-//! ray. Each variant is a node cost for the wide collapse (`Accel::build_tuned`), e.g.
-//! `REPS=7 cargo run --release -p renderer --example bvh_ab -- 1 3 4`.
+//! ray. Each variant is a node cost for the wide collapse (`Accel::build_tuned`), optionally
+//! followed by `:sse2` to force the SSE2 node test, e.g.
+//! `REPS=7 cargo run --release -p renderer --example bvh_ab -- 3:sse2 3 4`.
 
 use renderer::bench::{displaced_sphere, thread_cpu_seconds, trace, RayBatch, SphereStyle};
 use renderer::geometry::bvh::{default_build_params, TraversalCounts};
@@ -18,8 +19,15 @@ fn main() {
     for (name, mesh) in [("cornell", scene.mesh.clone()), ("sphere", displaced_sphere(230, 230, SphereStyle::Bench))] {
         let cam = RayBatch::camera(&mesh, 500_000, 1);
         let rnd = RayBatch::random_in_bounds(&mesh, 500_000, 2);
-        let accels: Vec<Accel> =
-            variants.iter().map(|v| Accel::build_tuned(&mesh, default_build_params(), v.parse().expect("variant: a node cost"))).collect();
+        let accels: Vec<Accel> = variants
+            .iter()
+            .map(|v| {
+                let (c, isa) = v.split_once(':').unwrap_or((v, ""));
+                let mut a = Accel::build_tuned(&mesh, default_build_params(), c.parse().expect("variant: a node cost"));
+                a.set_avx2(isa != "sse2");
+                a
+            })
+            .collect();
         for (v, a) in variants.iter().zip(&accels) {
             let s = a.bvh_shape();
             print!("{name} [{v}]: {} nodes, fill {:.2}, {} blocks;", s.nodes, s.avg_fill, s.blocks);

@@ -89,6 +89,10 @@ pub struct Bvh {
     blocks: Vec<Tri4>,
     /// Traversal stack entries the deepest path can need.
     stack_need: usize,
+    /// Set where the CPU has AVX2 and FMA: traversal then tests the eight children of a node
+    /// in one 8-wide AVX operation (`avx2::node_test`) instead of two SSE2 ones.
+    #[cfg(target_arch = "x86_64")]
+    avx2: Option<avx2::Avx2>,
 }
 
 /// Per-ray constants of the box and triangle tests.
@@ -126,6 +130,10 @@ impl RayData {
         })
     }
 }
+
+/// Traversal stack entry: child reference and its entry distance.
+type StackEntry = MaybeUninit<(u32, f32)>;
+type Stack = [StackEntry; STACK];
 
 /// Hit record inside the traversal: t, original triangle index, b1, b2.
 type HitRec = (f32, u32, f32, f32);
@@ -180,7 +188,7 @@ impl Bvh {
     pub fn build(tris: Vec<[Vec3; 3]>, valid: Vec<u32>, params: BvhBuildParams, c_node: f32) -> Bvh {
         debug_assert_eq!(tris.len(), valid.len());
         if tris.is_empty() {
-            return Bvh { nodes: Vec::new(), blocks: Vec::new(), stack_need: 0 };
+            return Bvh::new(Vec::new(), Vec::new(), 0);
         }
         let obvhs_tris: Vec<Triangle> = tris.iter().map(|t| Triangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() }).collect();
         let indices: Vec<u32> = (0..tris.len() as u32).collect();
@@ -212,8 +220,34 @@ impl Bvh {
         Collapser::new(&bvh2, &tris, &valid, c_node).run()
     }
 
+    fn new(nodes: Vec<Node>, blocks: Vec<Tri4>, stack_need: usize) -> Bvh {
+        Bvh {
+            nodes,
+            blocks,
+            stack_need,
+            #[cfg(target_arch = "x86_64")]
+            avx2: avx2::Avx2::detect(),
+        }
+    }
+
     pub fn node_count(&self) -> usize {
         self.nodes.len()
+    }
+
+    /// Whether traversal uses the AVX2 node test; `enable` asks for it (it is used only where
+    /// the CPU has AVX2 and FMA, the default there) or for the SSE2 one (for tests and A/B
+    /// benchmarks: both give identical results).
+    pub fn set_avx2(&mut self, enable: bool) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        {
+            self.avx2 = if enable { avx2::Avx2::detect() } else { None };
+            self.avx2.is_some()
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let _ = enable;
+            false
+        }
     }
 
     pub fn shape(&self) -> BvhShape {
@@ -234,50 +268,77 @@ impl Bvh {
         }
         let r = RayData::new(o, d)?;
         let mut best = None;
-        self.with_stack(|stack| self.traverse::<false, _>(&r, tmax, &mut best, stack, counts));
+        let (mut fixed, mut heap): (Stack, _) = ([MaybeUninit::uninit(); STACK], Vec::new());
+        let stack = self.stack(&mut fixed, &mut heap);
+        self.traverse::<false, _, _>(Sse2, &r, tmax, &mut best, stack, counts);
         best
     }
 
     /// Closest hit with t in (0, tmax): (t, original triangle index, b1, b2).
     #[inline]
     pub fn intersect(&self, o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, u32, f32, f32)> {
-        if self.nodes.is_empty() || !(tmax > 0.0) {
-            return None;
+        #[cfg(target_arch = "x86_64")]
+        if let Some(isa) = self.avx2 {
+            // SAFETY: an `Avx2` exists only where `Avx2::detect` found AVX2 and FMA on this CPU.
+            return unsafe { self.query_avx2::<false>(isa, o, d, tmax) };
         }
-        let r = RayData::new(o, d)?;
-        let mut best = None;
-        self.with_stack(|stack| self.traverse::<false, _>(&r, tmax, &mut best, stack, &mut NoProbe));
-        best
+        self.query::<false, _>(Sse2, o, d, tmax)
     }
 
     /// Any hit with t in (0, tmax).
     #[inline]
     pub fn occluded(&self, o: Vec3, d: Vec3, tmax: f32) -> bool {
-        if self.nodes.is_empty() || !(tmax > 0.0) {
-            return false;
+        #[cfg(target_arch = "x86_64")]
+        if let Some(isa) = self.avx2 {
+            // SAFETY: as in `intersect`.
+            return unsafe { self.query_avx2::<true>(isa, o, d, tmax) }.is_some();
         }
-        let Some(r) = RayData::new(o, d) else { return false };
-        let mut best = None;
-        self.with_stack(|stack| self.traverse::<true, _>(&r, tmax, &mut best, stack, &mut NoProbe));
-        best.is_some()
+        self.query::<true, _>(Sse2, o, d, tmax).is_some()
     }
 
+    /// `intersect` (or with `ANY`, `occluded`) with node test `isa`.
     #[inline(always)]
-    fn with_stack(&self, f: impl FnOnce(&mut [MaybeUninit<(u32, f32)>])) {
-        if self.stack_need <= STACK {
-            let mut s = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
-            f(&mut s)
-        } else {
-            let mut s = vec![MaybeUninit::<(u32, f32)>::uninit(); self.stack_need];
-            f(&mut s)
+    fn query<const ANY: bool, T: NodeTest>(&self, isa: T, o: Vec3, d: Vec3, tmax: f32) -> Option<HitRec> {
+        if self.nodes.is_empty() || !(tmax > 0.0) {
+            return None;
         }
+        let r = RayData::new(o, d)?;
+        let mut best = None;
+        // No closure here (a `with_stack(|stack| …)`): a closure is a function of its own,
+        // compiled without `query_avx2`'s target features unless inlined.
+        let (mut fixed, mut heap): (Stack, _) = ([MaybeUninit::uninit(); STACK], Vec::new());
+        let stack = self.stack(&mut fixed, &mut heap);
+        self.traverse::<ANY, _, _>(isa, &r, tmax, &mut best, stack, &mut NoProbe);
+        best
+    }
+
+    /// A traversal stack of `stack_need` entries: `fixed` on the call stack where that is
+    /// enough, else `heap`.
+    #[inline(always)]
+    fn stack<'s>(&self, fixed: &'s mut Stack, heap: &'s mut Vec<StackEntry>) -> &'s mut [StackEntry] {
+        if self.stack_need <= STACK {
+            fixed
+        } else {
+            heap.resize(self.stack_need, MaybeUninit::uninit());
+            heap
+        }
+    }
+
+    /// `query` with the AVX2 node test, compiled with AVX2 and FMA enabled (so the rest of the
+    /// query, inlined here, is VEX-encoded too; no operation changes, Rust never fuses a
+    /// multiply and an add by itself, so results stay bit-identical to the SSE2 path).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn query_avx2<const ANY: bool>(&self, isa: avx2::Avx2, o: Vec3, d: Vec3, tmax: f32) -> Option<HitRec> {
+        self.query::<ANY, _>(isa, o, d, tmax)
     }
 
     /// Closest hit (or, with `ANY`, the first hit found) in (0, tmax), into `best`.
     /// `stack` holds at least `stack_need` entries.
     #[inline(always)]
-    fn traverse<const ANY: bool, P: Probe>(
+    fn traverse<const ANY: bool, P: Probe, T: NodeTest>(
         &self,
+        isa: T,
         r: &RayData,
         mut tmax: f32,
         best: &mut Option<HitRec>,
@@ -290,7 +351,7 @@ impl Bvh {
             if cur & LEAF_BIT == 0 {
                 let node = &self.nodes[cur as usize];
                 probe.node();
-                let (mask, tnear) = node_test(node, r, tmax);
+                let (mask, tnear) = isa.node_test(node, r, tmax);
                 if mask != 0 {
                     let first = mask.trailing_zeros() as usize;
                     let rest = mask & (mask - 1);
@@ -381,6 +442,78 @@ impl Bvh {
                 unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * l)) };
             }
         }
+    }
+}
+
+/// A node test, for traversal to be monomorphised over.
+trait NodeTest: Copy {
+    /// Hit mask and conservative entry distances of the eight children of `node` for the ray
+    /// segment (0, tmax).
+    fn node_test(self, node: &Node, r: &RayData, tmax: f32) -> (u32, [f32; W]);
+}
+
+/// The baseline node test: glam's `Vec4`, SSE2 on x86-64 (scalar or NEON elsewhere).
+#[derive(Clone, Copy)]
+struct Sse2;
+
+impl NodeTest for Sse2 {
+    #[inline(always)]
+    fn node_test(self, node: &Node, r: &RayData, tmax: f32) -> (u32, [f32; W]) {
+        node_test(node, r, tmax)
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::{Node, NodeTest, RayData, SLAB_WIDEN, W};
+    use std::arch::x86_64::*;
+
+    /// Proof that this CPU has AVX2 and FMA: only `detect` makes one.
+    #[derive(Clone, Copy)]
+    pub(super) struct Avx2(());
+
+    impl Avx2 {
+        pub(super) fn detect() -> Option<Avx2> {
+            (is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")).then_some(Avx2(()))
+        }
+    }
+
+    impl NodeTest for Avx2 {
+        /// `super::node_test` with all eight children in one 256-bit register: the same
+        /// operations in the same order (max and min take their operands as glam's do), so the
+        /// mask and distances are bit-identical and the conservative widening is unchanged.
+        /// Not a `#[target_feature]` function itself, which Rust may not inline: it is inlined
+        /// into `Bvh::query_avx2`, which has the features, and only compiled there.
+        #[inline(always)]
+        fn node_test(self, node: &Node, r: &RayData, tmax: f32) -> (u32, [f32; W]) {
+            let mut tnear = [0.0f32; W];
+            // SAFETY: `self` exists only where `detect` found AVX2 and FMA on this CPU; the
+            // loads read one plane (8 floats, `plane`) and the store writes `tnear` (8 floats).
+            let mask = unsafe {
+                let plane = |p: usize| _mm256_loadu_ps(plane(&node.b[p]).as_ptr());
+                let t = |p: usize, axis: usize| {
+                    _mm256_mul_ps(_mm256_sub_ps(plane(p), _mm256_set1_ps(r.o[axis].x)), _mm256_set1_ps(r.inv[axis].x))
+                };
+                let lo = _mm256_set1_ps(1.0 - SLAB_WIDEN);
+                let hi = _mm256_set1_ps(1.0 + SLAB_WIDEN);
+                let zero = _mm256_setzero_ps();
+                let tn = _mm256_max_ps(_mm256_max_ps(t(r.near[0], 0), t(r.near[1], 1)), _mm256_max_ps(t(r.near[2], 2), zero));
+                let tf = _mm256_min_ps(_mm256_min_ps(t(r.far[0], 0), t(r.far[1], 1)), _mm256_min_ps(t(r.far[2], 2), _mm256_set1_ps(tmax)));
+                let tn = _mm256_mul_ps(tn, lo);
+                let tf = _mm256_mul_ps(tf, hi);
+                _mm256_storeu_ps(tnear.as_mut_ptr(), tn);
+                _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32
+            };
+            (mask, tnear)
+        }
+    }
+
+    /// The eight floats of one plane of a node.
+    #[inline(always)]
+    fn plane(p: &[glam::Vec4; 2]) -> &[f32; W] {
+        // SAFETY: `Vec4` is four `f32`s without padding (`repr(C)` or a 16-byte SIMD type of
+        // the same layout), so `[Vec4; 2]` is exactly `[f32; 8]`, and f32's alignment is lower.
+        unsafe { &*(p as *const [glam::Vec4; 2] as *const [f32; W]) }
     }
 }
 
@@ -613,7 +746,7 @@ impl<'a> Collapser<'a> {
         }
         // Each level pushes at most W − 1 entries, plus one popped-and-refilled slot.
         let stack_need = (max_depth + self.split_depth) * (W - 1) + 1;
-        Bvh { nodes: self.nodes, blocks: self.blocks, stack_need }
+        Bvh::new(self.nodes, self.blocks, stack_need)
     }
 
     /// Leaf reference for the triangles under binary node `i`.
@@ -703,7 +836,7 @@ mod tests {
         }
         let valid: Vec<u32> = (0..tris.len() as u32).collect();
         let bvh = Bvh::build(tris.clone(), valid, default_build_params(), C_NODE);
-        let mut heap = Bvh { nodes: bvh.nodes.clone(), blocks: bvh.blocks.clone(), stack_need: STACK + 1 };
+        let mut heap = Bvh::new(bvh.nodes.clone(), bvh.blocks.clone(), STACK + 1);
         heap.stack_need = heap.stack_need.max(bvh.stack_need);
         let mut rng = crate::rng::Pcg32::new(5, 0);
         let mut hits = 0;

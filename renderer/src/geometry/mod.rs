@@ -107,6 +107,12 @@ impl Accel {
         self.bvh.node_count()
     }
 
+    /// Whether traversal uses the AVX2 node test (see [`bvh::Bvh::set_avx2`]): `enable`
+    /// false forces the SSE2 one, for tests and A/B benchmarks.
+    pub fn set_avx2(&mut self, enable: bool) -> bool {
+        self.bvh.set_avx2(enable)
+    }
+
     /// Shape of the BVH (node count, average fill).
     pub fn bvh_shape(&self) -> bvh::BvhShape {
         self.bvh.shape()
