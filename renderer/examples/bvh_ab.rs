@@ -1,8 +1,9 @@
 //! A/B of BVH variants in one process, single-thread, interleaved run by run (best and median
 //! of `REPS` runs, per CPU second of the tracing thread), with node visits and block tests per
 //! ray. Each variant is a node cost for the wide collapse (`Accel::build_tuned`), optionally
-//! followed by `:sse2` to force the SSE2 node test, e.g.
-//! `REPS=7 cargo run --release -p renderer --example bvh_ab -- 3:sse2 3 4`.
+//! followed by `:sse2` to force the SSE2 node test (`:` for the default) and by an obvhs build
+//! preset (`:fast`, `:medium`, `:slow`; `very_fast` by default), e.g.
+//! `REPS=7 cargo run --release -p renderer --example bvh_ab -- 3:sse2 3 4 3::slow`.
 
 use renderer::bench::{displaced_sphere, thread_cpu_seconds, trace, RayBatch, SphereStyle};
 use renderer::geometry::bvh::{default_build_params, TraversalCounts};
@@ -22,8 +23,18 @@ fn main() {
         let accels: Vec<Accel> = variants
             .iter()
             .map(|v| {
-                let (c, isa) = v.split_once(':').unwrap_or((v, ""));
-                let mut a = Accel::build_tuned(&mesh, default_build_params(), c.parse().expect("variant: a node cost"));
+                let mut parts = v.split(':');
+                let c = parts.next().unwrap_or("");
+                let isa = parts.next().unwrap_or("");
+                let params = match parts.next().unwrap_or("") {
+                    "" | "very_fast" => default_build_params(),
+                    "fastest" => obvhs::BvhBuildParams::fastest_build(),
+                    "fast" => obvhs::BvhBuildParams::fast_build(),
+                    "medium" => obvhs::BvhBuildParams::medium_build(),
+                    "slow" => obvhs::BvhBuildParams::slow_build(),
+                    p => panic!("unknown obvhs preset {p}"),
+                };
+                let mut a = Accel::build_tuned(&mesh, params, c.parse().expect("variant: a node cost"));
                 a.set_avx2(isa != "sse2");
                 a
             })
