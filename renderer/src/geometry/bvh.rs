@@ -35,11 +35,29 @@ const G: usize = W / 4;
 /// Largest leaf the surface-area heuristic may choose (four `Tri4` blocks).
 const LEAF_CAP: u32 = 16;
 /// Surface-area-heuristic cost of a node visit relative to one `Tri4` test, for the optimal
-/// wide collapse. Measured on the displaced sphere (`examples/bvh_ab.rs`, docs/performance.md):
-/// 1 gives many one-block leaves (38k leaves, nodes 6.9 of 8 full, 7.9 node visits per random
-/// ray); 3–4 give fuller leaves and fewer nodes (3.4k, 7.3 visits) and trace ~10% faster; the
-/// Cornell box is one node from 2 on, as fast as before.
+/// wide collapse of a mesh too large for the caches (more than `SMALL_MESH` triangles).
+/// Measured on the displaced sphere (`examples/bvh_ab.rs`, docs/performance.md): 1 gives many
+/// one-block leaves (38k leaves, nodes 6.9 of 8 full, 7.9 node visits per random ray); 3–5 give
+/// fuller leaves and fewer nodes (3.4k at 3, 7.3 visits) and trace ~10% faster, within noise of
+/// each other.
 pub const C_NODE: f32 = 3.0;
+/// The node cost for meshes of at most `SMALL_MESH` triangles, whose BVH stays in cache, so a
+/// node visit costs about what a block test does. On the Cornell box (36 triangles), 3 makes
+/// one node of eight leaves, as fast in the ray benchmark but ~7% slower in the integrator
+/// (whose rays start on the walls) than 1.
+pub const C_NODE_SMALL: f32 = 1.0;
+/// Largest mesh collapsed with `C_NODE_SMALL`: 4096 triangles are ~200 KB of `Tri4` blocks.
+/// (Chosen, not tuned: only 36 and 105,800 triangles were measured.)
+pub const SMALL_MESH: usize = 4096;
+
+/// The node cost for a mesh of `triangles` triangles.
+pub fn node_cost(triangles: usize) -> f32 {
+    if triangles <= SMALL_MESH {
+        C_NODE_SMALL
+    } else {
+        C_NODE
+    }
+}
 /// Most `Tri4` blocks in one leaf (the block count has 4 bits in a child reference).
 const LEAF_BLOCKS_MAX: usize = 16;
 /// Child reference: bit 31 set for a leaf, whose bits 27..31 hold the block count − 1 and bits
@@ -184,7 +202,7 @@ pub struct BvhShape {
 impl Bvh {
     /// `valid` lists the triangles to put in the BVH (the non-degenerate ones); `tris` are
     /// their vertices, indexed like `valid`. `c_node` is the surface-area-heuristic cost of a
-    /// node visit relative to a `Tri4` test (`C_NODE` unless tuning).
+    /// node visit relative to a `Tri4` test (`node_cost` unless tuning).
     pub fn build(tris: Vec<[Vec3; 3]>, valid: Vec<u32>, params: BvhBuildParams, c_node: f32) -> Bvh {
         debug_assert_eq!(tris.len(), valid.len());
         if tris.is_empty() {
@@ -835,7 +853,7 @@ mod tests {
             tris.push([Vec3::new(-s, -s, s * 0.1), Vec3::new(s, -s, s * 0.2), Vec3::new(0.0, s, s * 0.3)]);
         }
         let valid: Vec<u32> = (0..tris.len() as u32).collect();
-        let bvh = Bvh::build(tris.clone(), valid, default_build_params(), C_NODE);
+        let bvh = Bvh::build(tris.clone(), valid, default_build_params(), node_cost(400));
         let mut heap = Bvh::new(bvh.nodes.clone(), bvh.blocks.clone(), STACK + 1);
         heap.stack_need = heap.stack_need.max(bvh.stack_need);
         let mut rng = crate::rng::Pcg32::new(5, 0);

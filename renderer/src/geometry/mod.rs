@@ -82,11 +82,11 @@ impl Accel {
 
     /// [`Accel::build`] with explicit obvhs build parameters (for benchmarking the presets).
     pub fn build_with(mesh: &Mesh, params: obvhs::BvhBuildParams) -> Accel {
-        Accel::build_tuned(mesh, params, bvh::C_NODE)
+        Accel::build_tuned(mesh, params, bvh::node_cost(mesh.triangles.len()))
     }
 
     /// [`Accel::build_with`] with the surface-area-heuristic cost of a node visit relative to
-    /// a 4-triangle leaf block test (for tuning it; the default is `bvh::C_NODE`).
+    /// a 4-triangle leaf block test (for tuning it; the default is `bvh::node_cost`).
     pub fn build_tuned(mesh: &Mesh, params: obvhs::BvhBuildParams, c_node: f32) -> Accel {
         let n = mesh.positions.len();
         // Triangles with an out-of-range index, a non-finite vertex or zero area are left out
