@@ -1,8 +1,9 @@
 //! The ray-query BVH: obvhs builds a binary BVH (PLOC, then reinsertion optimisation), which is
 //! collapsed here (surface-area-optimal, by dynamic programming as in Ylitie et al. 2017,
 //! "Efficient incoherent ray traversal on GPUs through compressed wide BVHs") into an 8-wide
-//! BVH of our own layout — float child boxes in
-//! structure-of-arrays form, tested four children at a time — whose leaves (up to 16 triangles,
+//! BVH of our own layout — float child boxes in structure-of-arrays form, tested all eight at
+//! once with AVX2 where the CPU has it (detected at run time), else four at a time with SSE2,
+//! bit-identically — whose leaves (up to 16 triangles,
 //! chosen by the surface area heuristic) are blocks of four triangles stored side by side and
 //! tested together (`Tri4`). Traversal visits children nearest first, prefetches the ones it
 //! stacks, and skips any stacked subtree that starts beyond the closest hit found so far.
