@@ -2,6 +2,7 @@
 //! `cargo run --release -p renderer --example bvh_quick [rays]`.
 
 use renderer::bench::{displaced_sphere, embree_script, ray_bench, EmbreeSetup, RayBatch, SphereStyle};
+use renderer::geometry::{bvh::TraversalCounts, Accel};
 use renderer::scene::Scene;
 use std::path::Path;
 use tools_venv::embree_python;
@@ -15,6 +16,20 @@ fn main() {
     for (name, mesh) in [("cornell", scene.mesh.clone()), ("sphere", displaced_sphere(230, 230, SphereStyle::Bench))] {
         let cam = RayBatch::camera(&mesh, rays, 1);
         let rnd = RayBatch::random_in_bounds(&mesh, rays, 2);
+        let accel = Accel::build(&mesh);
+        let shape = accel.bvh_shape();
+        print!(
+            "== {name}: {} nodes, {:.2} of 8 children filled on average, {} leaves, {} Tri4 blocks; per ray",
+            shape.nodes, shape.avg_fill, shape.leaves, shape.blocks
+        );
+        for (set, batch) in [("camera", &cam), ("random", &rnd)] {
+            let mut c = TraversalCounts::default();
+            for i in 0..batch.len() {
+                accel.intersect_counted(&batch.ray(i), batch.tmax[i], &mut c);
+            }
+            print!(" {set}: {:.2} node visits, {:.2} block tests;", c.nodes as f64 / c.rays as f64, c.blocks as f64 / c.rays as f64);
+        }
+        println!();
         let report = ray_bench(&mesh, &[("camera", &cam), ("random", &rnd)], 1, 3, Some(&setup)).expect("bench runs");
         println!("== {name}\n{report}");
     }

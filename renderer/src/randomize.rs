@@ -419,12 +419,10 @@ mod scene_tests {
                     assert!((0.5 - 1e-4..=2.0 + 1e-4).contains(&r), "{}: {r}", m.name);
                     lights += 1;
                 }
-                if let MaterialKind::Conductor { specular_tint, .. } = &m.kind {
-                    // A textured tint stays a reflectance: texels ≤ 1 times a scale ≤ 1.
-                    if let ColorParam::Texture { scale, index, .. } = specular_tint {
-                        assert!(scale.max_element() <= 1.0 && (*index as usize) < scene.textures.len());
-                        textured_metals += 1;
-                    }
+                // A textured tint stays a reflectance: texels ≤ 1 times a scale ≤ 1.
+                if let MaterialKind::Conductor { specular_tint: ColorParam::Texture { scale, index, .. }, .. } = &m.kind {
+                    assert!(scale.max_element() <= 1.0 && (*index as usize) < scene.textures.len());
+                    textured_metals += 1;
                 }
             }
         }

@@ -1,6 +1,9 @@
 //! The ray-query BVH: obvhs builds a binary BVH (PLOC, then reinsertion optimisation), which is
-//! collapsed here into an 8-wide BVH of our own layout — float child boxes in
-//! structure-of-arrays form, tested four children at a time — whose leaves (up to 16 triangles,
+//! collapsed here (surface-area-optimal, by dynamic programming as in Ylitie et al. 2017,
+//! "Efficient incoherent ray traversal on GPUs through compressed wide BVHs") into an 8-wide
+//! BVH of our own layout — float child boxes in structure-of-arrays form, tested all eight at
+//! once with AVX2 where the CPU has it (detected at run time), else four at a time with SSE2,
+//! bit-identically — whose leaves (up to 16 triangles,
 //! chosen by the surface area heuristic) are blocks of four triangles stored side by side and
 //! tested together (`Tri4`). Traversal visits children nearest first, prefetches the ones it
 //! stacks, and skips any stacked subtree that starts beyond the closest hit found so far.
@@ -32,11 +35,30 @@ const W: usize = 8;
 const G: usize = W / 4;
 /// Largest leaf the surface-area heuristic may choose (four `Tri4` blocks).
 const LEAF_CAP: u32 = 16;
-/// Surface-area-heuristic cost of a node visit relative to one `Tri4` test. Measured (2026-11-23,
-/// displaced sphere and Cornell box): 0.5 leaves too many small leaves (more node visits, each
-/// a likely cache miss on a 100k-triangle mesh), 2 too few (a Cornell-box ray then tests 5+
-/// blocks); 1 was best or tied on both.
-const C_NODE: f32 = 1.0;
+/// Surface-area-heuristic cost of a node visit relative to one `Tri4` test, for the optimal
+/// wide collapse of a mesh too large for the caches (more than `SMALL_MESH` triangles).
+/// Measured on the displaced sphere (`examples/bvh_ab.rs`, docs/performance.md): 1 gives many
+/// one-block leaves (38k leaves, nodes 6.9 of 8 full, 7.9 node visits per random ray); 3–5 give
+/// fuller leaves and fewer nodes (3.4k at 3, 7.3 visits) and trace ~10% faster, within noise of
+/// each other.
+pub const C_NODE: f32 = 3.0;
+/// The node cost for meshes of at most `SMALL_MESH` triangles, whose BVH stays in cache, so a
+/// node visit costs about what a block test does. On the Cornell box (36 triangles), 3 makes
+/// one node of eight leaves, as fast in the ray benchmark but ~7% slower in the integrator
+/// (whose rays start on the walls) than 1.
+pub const C_NODE_SMALL: f32 = 1.0;
+/// Largest mesh collapsed with `C_NODE_SMALL`: 4096 triangles are ~200 KB of `Tri4` blocks.
+/// (Chosen, not tuned: only 36 and 105,800 triangles were measured.)
+pub const SMALL_MESH: usize = 4096;
+
+/// The node cost for a mesh of `triangles` triangles.
+pub fn node_cost(triangles: usize) -> f32 {
+    if triangles <= SMALL_MESH {
+        C_NODE_SMALL
+    } else {
+        C_NODE
+    }
+}
 /// Most `Tri4` blocks in one leaf (the block count has 4 bits in a child reference).
 const LEAF_BLOCKS_MAX: usize = 16;
 /// Child reference: bit 31 set for a leaf, whose bits 27..31 hold the block count − 1 and bits
@@ -86,6 +108,10 @@ pub struct Bvh {
     blocks: Vec<Tri4>,
     /// Traversal stack entries the deepest path can need.
     stack_need: usize,
+    /// Set where the CPU has AVX2 and FMA: traversal then tests the eight children of a node
+    /// in one 8-wide AVX operation (`avx2::node_test`) instead of two SSE2 ones.
+    #[cfg(target_arch = "x86_64")]
+    avx2: Option<avx2::Avx2>,
 }
 
 /// Per-ray constants of the box and triangle tests.
@@ -124,16 +150,64 @@ impl RayData {
     }
 }
 
+/// Traversal stack entry: child reference and its entry distance.
+type StackEntry = MaybeUninit<(u32, f32)>;
+type Stack = [StackEntry; STACK];
+
 /// Hit record inside the traversal: t, original triangle index, b1, b2.
 type HitRec = (f32, u32, f32, f32);
 
+/// What a traversal did, for statistics (`Bvh::intersect_counted`); the benchmark traversal
+/// uses `NoProbe`, which compiles to nothing.
+trait Probe {
+    fn node(&mut self);
+    fn block(&mut self);
+}
+
+struct NoProbe;
+
+impl Probe for NoProbe {
+    #[inline(always)]
+    fn node(&mut self) {}
+    #[inline(always)]
+    fn block(&mut self) {}
+}
+
+/// Node visits and `Tri4` block tests summed over the rays counted.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TraversalCounts {
+    pub rays: u64,
+    pub nodes: u64,
+    pub blocks: u64,
+}
+
+impl Probe for TraversalCounts {
+    fn node(&mut self) {
+        self.nodes += 1;
+    }
+    fn block(&mut self) {
+        self.blocks += 1;
+    }
+}
+
+/// Shape of the wide BVH.
+#[derive(Clone, Copy, Debug)]
+pub struct BvhShape {
+    pub nodes: usize,
+    /// Children (inner and leaf) per node, on average, of `W`.
+    pub avg_fill: f64,
+    pub leaves: usize,
+    pub blocks: usize,
+}
+
 impl Bvh {
     /// `valid` lists the triangles to put in the BVH (the non-degenerate ones); `tris` are
-    /// their vertices, indexed like `valid`.
-    pub fn build(tris: Vec<[Vec3; 3]>, valid: Vec<u32>, params: BvhBuildParams) -> Bvh {
+    /// their vertices, indexed like `valid`. `c_node` is the surface-area-heuristic cost of a
+    /// node visit relative to a `Tri4` test (`node_cost` unless tuning).
+    pub fn build(tris: Vec<[Vec3; 3]>, valid: Vec<u32>, params: BvhBuildParams, c_node: f32) -> Bvh {
         debug_assert_eq!(tris.len(), valid.len());
         if tris.is_empty() {
-            return Bvh { nodes: Vec::new(), blocks: Vec::new(), stack_need: 0 };
+            return Bvh::new(Vec::new(), Vec::new(), 0);
         }
         let obvhs_tris: Vec<Triangle> = tris.iter().map(|t| Triangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() }).collect();
         let indices: Vec<u32> = (0..tris.len() as u32).collect();
@@ -162,58 +236,141 @@ impl Bvh {
             )
         };
         ReinsertionOptimizer::default().run(&mut bvh2, params.reinsertion_batch_ratio, None);
-        Collapser::new(&bvh2, &tris, &valid).run()
+        Collapser::new(&bvh2, &tris, &valid, c_node).run()
+    }
+
+    fn new(nodes: Vec<Node>, blocks: Vec<Tri4>, stack_need: usize) -> Bvh {
+        Bvh {
+            nodes,
+            blocks,
+            stack_need,
+            #[cfg(target_arch = "x86_64")]
+            avx2: avx2::Avx2::detect(),
+        }
     }
 
     pub fn node_count(&self) -> usize {
         self.nodes.len()
     }
 
-    /// Closest hit with t in (0, tmax): (t, original triangle index, b1, b2).
-    #[inline]
-    pub fn intersect(&self, o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, u32, f32, f32)> {
+    /// Whether traversal uses the AVX2 node test; `enable` asks for it (it is used only where
+    /// the CPU has AVX2 and FMA, the default there) or for the SSE2 one (for tests and A/B
+    /// benchmarks: both give identical results).
+    pub fn set_avx2(&mut self, enable: bool) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        {
+            self.avx2 = if enable { avx2::Avx2::detect() } else { None };
+            self.avx2.is_some()
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let _ = enable;
+            false
+        }
+    }
+
+    pub fn shape(&self) -> BvhShape {
+        let children = self.nodes.iter().flat_map(|n| n.child).filter(|&c| c != u32::MAX);
+        let (mut filled, mut leaves) = (0, 0);
+        for c in children {
+            filled += 1;
+            leaves += (c & LEAF_BIT != 0) as usize;
+        }
+        BvhShape { nodes: self.nodes.len(), avg_fill: filled as f64 / self.nodes.len().max(1) as f64, leaves, blocks: self.blocks.len() }
+    }
+
+    /// `intersect`, counting node visits and block tests into `counts`.
+    pub fn intersect_counted(&self, o: Vec3, d: Vec3, tmax: f32, counts: &mut TraversalCounts) -> Option<(f32, u32, f32, f32)> {
+        counts.rays += 1;
         if self.nodes.is_empty() || !(tmax > 0.0) {
             return None;
         }
         let r = RayData::new(o, d)?;
         let mut best = None;
-        self.with_stack(|stack| self.traverse::<false>(&r, tmax, &mut best, stack));
+        let (mut fixed, mut heap): (Stack, _) = ([MaybeUninit::uninit(); STACK], Vec::new());
+        let stack = self.stack(&mut fixed, &mut heap);
+        self.traverse::<false, _, _>(Sse2, &r, tmax, &mut best, stack, counts);
         best
+    }
+
+    /// Closest hit with t in (0, tmax): (t, original triangle index, b1, b2).
+    #[inline]
+    pub fn intersect(&self, o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, u32, f32, f32)> {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(isa) = self.avx2 {
+            // SAFETY: an `Avx2` exists only where `Avx2::detect` found AVX2 and FMA on this CPU.
+            return unsafe { self.query_avx2::<false>(isa, o, d, tmax) };
+        }
+        self.query::<false, _>(Sse2, o, d, tmax)
     }
 
     /// Any hit with t in (0, tmax).
     #[inline]
     pub fn occluded(&self, o: Vec3, d: Vec3, tmax: f32) -> bool {
-        if self.nodes.is_empty() || !(tmax > 0.0) {
-            return false;
+        #[cfg(target_arch = "x86_64")]
+        if let Some(isa) = self.avx2 {
+            // SAFETY: as in `intersect`.
+            return unsafe { self.query_avx2::<true>(isa, o, d, tmax) }.is_some();
         }
-        let Some(r) = RayData::new(o, d) else { return false };
-        let mut best = None;
-        self.with_stack(|stack| self.traverse::<true>(&r, tmax, &mut best, stack));
-        best.is_some()
+        self.query::<true, _>(Sse2, o, d, tmax).is_some()
     }
 
+    /// `intersect` (or with `ANY`, `occluded`) with node test `isa`.
     #[inline(always)]
-    fn with_stack(&self, f: impl FnOnce(&mut [MaybeUninit<(u32, f32)>])) {
-        if self.stack_need <= STACK {
-            let mut s = [MaybeUninit::<(u32, f32)>::uninit(); STACK];
-            f(&mut s)
-        } else {
-            let mut s = vec![MaybeUninit::<(u32, f32)>::uninit(); self.stack_need];
-            f(&mut s)
+    fn query<const ANY: bool, T: NodeTest>(&self, isa: T, o: Vec3, d: Vec3, tmax: f32) -> Option<HitRec> {
+        if self.nodes.is_empty() || !(tmax > 0.0) {
+            return None;
         }
+        let r = RayData::new(o, d)?;
+        let mut best = None;
+        // No closure here (a `with_stack(|stack| …)`): a closure is a function of its own,
+        // compiled without `query_avx2`'s target features unless inlined.
+        let (mut fixed, mut heap): (Stack, _) = ([MaybeUninit::uninit(); STACK], Vec::new());
+        let stack = self.stack(&mut fixed, &mut heap);
+        self.traverse::<ANY, _, _>(isa, &r, tmax, &mut best, stack, &mut NoProbe);
+        best
+    }
+
+    /// A traversal stack of `stack_need` entries: `fixed` on the call stack where that is
+    /// enough, else `heap`.
+    #[inline(always)]
+    fn stack<'s>(&self, fixed: &'s mut Stack, heap: &'s mut Vec<StackEntry>) -> &'s mut [StackEntry] {
+        if self.stack_need <= STACK {
+            fixed
+        } else {
+            heap.resize(self.stack_need, MaybeUninit::uninit());
+            heap
+        }
+    }
+
+    /// `query` with the AVX2 node test, compiled with AVX2 and FMA enabled (so the rest of the
+    /// query, inlined here, is VEX-encoded too; no operation changes, Rust never fuses a
+    /// multiply and an add by itself, so results stay bit-identical to the SSE2 path).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn query_avx2<const ANY: bool>(&self, isa: avx2::Avx2, o: Vec3, d: Vec3, tmax: f32) -> Option<HitRec> {
+        self.query::<ANY, _>(isa, o, d, tmax)
     }
 
     /// Closest hit (or, with `ANY`, the first hit found) in (0, tmax), into `best`.
     /// `stack` holds at least `stack_need` entries.
     #[inline(always)]
-    fn traverse<const ANY: bool>(&self, r: &RayData, mut tmax: f32, best: &mut Option<HitRec>, stack: &mut [MaybeUninit<(u32, f32)>]) {
+    fn traverse<const ANY: bool, P: Probe, T: NodeTest>(
+        &self,
+        isa: T,
+        r: &RayData,
+        mut tmax: f32,
+        best: &mut Option<HitRec>,
+        stack: &mut [MaybeUninit<(u32, f32)>],
+        probe: &mut P,
+    ) {
         let mut sp = 0usize;
         let mut cur = 0u32;
         loop {
             if cur & LEAF_BIT == 0 {
                 let node = &self.nodes[cur as usize];
-                let (mask, tnear) = node_test(node, r, tmax);
+                probe.node();
+                let (mask, tnear) = isa.node_test(node, r, tmax);
                 if mask != 0 {
                     let first = mask.trailing_zeros() as usize;
                     let rest = mask & (mask - 1);
@@ -255,6 +412,7 @@ impl Bvh {
                 let first = (cur & ((1 << BLOCK_BITS) - 1)) as usize;
                 let n = ((cur & !LEAF_BIT) >> BLOCK_BITS) as usize + 1;
                 for blk in &self.blocks[first..first + n] {
+                    probe.block();
                     if let Some(h) = tri4_test(blk, r, tmax) {
                         tmax = h.0;
                         *best = Some(h);
@@ -303,6 +461,78 @@ impl Bvh {
                 unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * l)) };
             }
         }
+    }
+}
+
+/// A node test, for traversal to be monomorphised over.
+trait NodeTest: Copy {
+    /// Hit mask and conservative entry distances of the eight children of `node` for the ray
+    /// segment (0, tmax).
+    fn node_test(self, node: &Node, r: &RayData, tmax: f32) -> (u32, [f32; W]);
+}
+
+/// The baseline node test: glam's `Vec4`, SSE2 on x86-64 (scalar or NEON elsewhere).
+#[derive(Clone, Copy)]
+struct Sse2;
+
+impl NodeTest for Sse2 {
+    #[inline(always)]
+    fn node_test(self, node: &Node, r: &RayData, tmax: f32) -> (u32, [f32; W]) {
+        node_test(node, r, tmax)
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::{Node, NodeTest, RayData, SLAB_WIDEN, W};
+    use std::arch::x86_64::*;
+
+    /// Proof that this CPU has AVX2 and FMA: only `detect` makes one.
+    #[derive(Clone, Copy)]
+    pub(super) struct Avx2(());
+
+    impl Avx2 {
+        pub(super) fn detect() -> Option<Avx2> {
+            (is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")).then_some(Avx2(()))
+        }
+    }
+
+    impl NodeTest for Avx2 {
+        /// `super::node_test` with all eight children in one 256-bit register: the same
+        /// operations in the same order (max and min take their operands as glam's do), so the
+        /// mask and distances are bit-identical and the conservative widening is unchanged.
+        /// Not a `#[target_feature]` function itself, which Rust may not inline: it is inlined
+        /// into `Bvh::query_avx2`, which has the features, and only compiled there.
+        #[inline(always)]
+        fn node_test(self, node: &Node, r: &RayData, tmax: f32) -> (u32, [f32; W]) {
+            let mut tnear = [0.0f32; W];
+            // SAFETY: `self` exists only where `detect` found AVX2 and FMA on this CPU; the
+            // loads read one plane (8 floats, `plane`) and the store writes `tnear` (8 floats).
+            let mask = unsafe {
+                let plane = |p: usize| _mm256_loadu_ps(plane(&node.b[p]).as_ptr());
+                let t = |p: usize, axis: usize| {
+                    _mm256_mul_ps(_mm256_sub_ps(plane(p), _mm256_set1_ps(r.o[axis].x)), _mm256_set1_ps(r.inv[axis].x))
+                };
+                let lo = _mm256_set1_ps(1.0 - SLAB_WIDEN);
+                let hi = _mm256_set1_ps(1.0 + SLAB_WIDEN);
+                let zero = _mm256_setzero_ps();
+                let tn = _mm256_max_ps(_mm256_max_ps(t(r.near[0], 0), t(r.near[1], 1)), _mm256_max_ps(t(r.near[2], 2), zero));
+                let tf = _mm256_min_ps(_mm256_min_ps(t(r.far[0], 0), t(r.far[1], 1)), _mm256_min_ps(t(r.far[2], 2), _mm256_set1_ps(tmax)));
+                let tn = _mm256_mul_ps(tn, lo);
+                let tf = _mm256_mul_ps(tf, hi);
+                _mm256_storeu_ps(tnear.as_mut_ptr(), tn);
+                _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32
+            };
+            (mask, tnear)
+        }
+    }
+
+    /// The eight floats of one plane of a node.
+    #[inline(always)]
+    fn plane(p: &[glam::Vec4; 2]) -> &[f32; W] {
+        // SAFETY: `Vec4` is four `f32`s without padding (`repr(C)` or a 16-byte SIMD type of
+        // the same layout), so `[Vec4; 2]` is exactly `[f32; 8]`, and f32's alignment is lower.
+        unsafe { &*(p as *const [glam::Vec4; 2] as *const [f32; W]) }
     }
 }
 
@@ -405,13 +635,28 @@ fn tri4_scalar(blk: &Tri4, r: &RayData, mut tmax: f32) -> Option<HitRec> {
     best
 }
 
+/// How a binary subtree is laid out in a given number of slots of a wide node.
+#[derive(Clone, Copy)]
+enum Pick {
+    /// One slot: a leaf with all its triangles.
+    Leaf,
+    /// One slot: a wide node of its own.
+    Inner,
+    /// The children share the slots, this many to the left one.
+    Split(u8),
+    /// One slot fewer does as well.
+    Fewer,
+}
+
 /// Turns obvhs's binary BVH into our 8-wide one.
 struct Collapser<'a> {
     bvh2: &'a Bvh2,
     tris: &'a [[Vec3; 3]],
     valid: &'a [u32],
-    /// Whether each binary subtree becomes one leaf (surface area heuristic).
-    leaf: Vec<bool>,
+    /// Per binary node and slot budget (1..=W, index − 1): how its subtree is best laid out.
+    pick: Vec<[Pick; W]>,
+    /// Per binary node that becomes a wide node: slots of the W given to its left child.
+    inner_split: Vec<u8>,
     nodes: Vec<Node>,
     blocks: Vec<Tri4>,
     /// Deepest chain of nodes made by `split_leaf` (extra traversal depth below a leaf).
@@ -419,9 +664,9 @@ struct Collapser<'a> {
 }
 
 impl<'a> Collapser<'a> {
-    fn new(bvh2: &'a Bvh2, tris: &'a [[Vec3; 3]], valid: &'a [u32]) -> Collapser<'a> {
+    fn new(bvh2: &'a Bvh2, tris: &'a [[Vec3; 3]], valid: &'a [u32], c_node: f32) -> Collapser<'a> {
         let n2 = &bvh2.nodes;
-        // Preorder with an explicit stack (a degenerate build may be deep), then counts bottom-up.
+        // Preorder with an explicit stack (a degenerate build may be deep), then costs bottom-up.
         let mut order = Vec::with_capacity(n2.len());
         let mut st = vec![0u32];
         while let Some(i) = st.pop() {
@@ -432,30 +677,58 @@ impl<'a> Collapser<'a> {
             }
         }
         let mut count = vec![0u32; n2.len()];
-        let mut cost = vec![0f32; n2.len()];
-        let mut leaf = vec![false; n2.len()];
+        let mut cost = vec![[0f32; W]; n2.len()];
+        let mut pick = vec![[Pick::Leaf; W]; n2.len()];
+        let mut inner_split = vec![0u8; n2.len()];
         for &i in order.iter().rev() {
             let nd = &n2[i as usize];
             let area = nd.aabb.half_area();
             let i = i as usize;
             if nd.prim_count > 0 {
                 count[i] = nd.prim_count;
-                leaf[i] = true;
-                cost[i] = area * nd.prim_count.div_ceil(4) as f32;
-            } else {
-                let (l, r) = (nd.first_index as usize, nd.first_index as usize + 1);
-                count[i] = count[l] + count[r];
-                let inner = area * C_NODE + cost[l] + cost[r];
-                let as_leaf = area * count[i].div_ceil(4) as f32;
-                leaf[i] = count[i] <= LEAF_CAP && as_leaf <= inner;
-                cost[i] = if leaf[i] { as_leaf } else { inner };
+                cost[i] = [area * nd.prim_count.div_ceil(4) as f32; W];
+                continue;
+            }
+            let (l, r) = (nd.first_index as usize, nd.first_index as usize + 1);
+            count[i] = count[l] + count[r];
+            let as_leaf = if count[i] <= LEAF_CAP { area * count[i].div_ceil(4) as f32 } else { f32::INFINITY };
+            // Cheapest way to spread the subtree over j slots, j = 2..=W: k to the left child.
+            let mut dist = [(f32::INFINITY, 0u8); W + 1];
+            for (j, d) in dist.iter_mut().enumerate().skip(2) {
+                for k in 1..j {
+                    let c = cost[l][k - 1] + cost[r][j - k - 1];
+                    if c < d.0 {
+                        *d = (c, k as u8);
+                    }
+                }
+            }
+            let inner = area * c_node + dist[W].0;
+            inner_split[i] = dist[W].1;
+            (cost[i][0], pick[i][0]) = if as_leaf <= inner { (as_leaf, Pick::Leaf) } else { (inner, Pick::Inner) };
+            for j in 2..=W {
+                (cost[i][j - 1], pick[i][j - 1]) =
+                    if dist[j].0 < cost[i][j - 2] { (dist[j].0, Pick::Split(dist[j].1)) } else { (cost[i][j - 2], Pick::Fewer) };
             }
         }
-        Collapser { bvh2, tris, valid, leaf, nodes: Vec::new(), blocks: Vec::new(), split_depth: 0 }
+        Collapser { bvh2, tris, valid, pick, inner_split, nodes: Vec::new(), blocks: Vec::new(), split_depth: 0 }
+    }
+
+    /// Appends to `out` the binary nodes that represent the subtree under `n` in at most
+    /// `slots` children of a wide node (the optimum found by `new`).
+    fn collect(&self, n: u32, slots: usize, out: &mut Vec<u32>) {
+        match self.pick[n as usize][slots - 1] {
+            Pick::Leaf | Pick::Inner => out.push(n),
+            Pick::Fewer => self.collect(n, slots - 1, out),
+            Pick::Split(k) => {
+                let f = self.bvh2.nodes[n as usize].first_index;
+                self.collect(f, k as usize, out);
+                self.collect(f + 1, slots - k as usize, out);
+            }
+        }
     }
 
     fn is_leaf(&self, i: u32) -> bool {
-        self.leaf[i as usize]
+        matches!(self.pick[i as usize][0], Pick::Leaf)
     }
 
     fn run(mut self) -> Bvh {
@@ -473,17 +746,10 @@ impl<'a> Collapser<'a> {
         while let Some((i2, wi, depth)) = work.pop() {
             max_depth = max_depth.max(depth);
             let nd = &self.bvh2.nodes[i2 as usize];
-            let mut kids = vec![nd.first_index, nd.first_index + 1];
-            // Open the largest openable child until the node is full (greedy surface area).
-            while kids.len() < W {
-                let best = kids.iter().enumerate().filter(|(_, &k)| !self.is_leaf(k)).max_by(|a, b| {
-                    self.bvh2.nodes[*a.1 as usize].aabb.half_area().total_cmp(&self.bvh2.nodes[*b.1 as usize].aabb.half_area())
-                });
-                let Some((j, &k)) = best else { break };
-                let f = self.bvh2.nodes[k as usize].first_index;
-                kids[j] = f;
-                kids.push(f + 1);
-            }
+            let mut kids = Vec::with_capacity(W);
+            let k = self.inner_split[i2 as usize] as usize;
+            self.collect(nd.first_index, k, &mut kids);
+            self.collect(nd.first_index + 1, W - k, &mut kids);
             for (slot, &k) in kids.iter().enumerate() {
                 let aabb = self.bvh2.nodes[k as usize].aabb;
                 let c = if self.is_leaf(k) {
@@ -499,7 +765,7 @@ impl<'a> Collapser<'a> {
         }
         // Each level pushes at most W − 1 entries, plus one popped-and-refilled slot.
         let stack_need = (max_depth + self.split_depth) * (W - 1) + 1;
-        Bvh { nodes: self.nodes, blocks: self.blocks, stack_need }
+        Bvh::new(self.nodes, self.blocks, stack_need)
     }
 
     /// Leaf reference for the triangles under binary node `i`.
@@ -588,8 +854,8 @@ mod tests {
             tris.push([Vec3::new(-s, -s, s * 0.1), Vec3::new(s, -s, s * 0.2), Vec3::new(0.0, s, s * 0.3)]);
         }
         let valid: Vec<u32> = (0..tris.len() as u32).collect();
-        let bvh = Bvh::build(tris.clone(), valid, default_build_params());
-        let mut heap = Bvh { nodes: bvh.nodes.clone(), blocks: bvh.blocks.clone(), stack_need: STACK + 1 };
+        let bvh = Bvh::build(tris.clone(), valid, default_build_params(), node_cost(400));
+        let mut heap = Bvh::new(bvh.nodes.clone(), bvh.blocks.clone(), STACK + 1);
         heap.stack_need = heap.stack_need.max(bvh.stack_need);
         let mut rng = crate::rng::Pcg32::new(5, 0);
         let mut hits = 0;

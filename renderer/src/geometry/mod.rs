@@ -82,6 +82,12 @@ impl Accel {
 
     /// [`Accel::build`] with explicit obvhs build parameters (for benchmarking the presets).
     pub fn build_with(mesh: &Mesh, params: obvhs::BvhBuildParams) -> Accel {
+        Accel::build_tuned(mesh, params, bvh::node_cost(mesh.triangles.len()))
+    }
+
+    /// [`Accel::build_with`] with the surface-area-heuristic cost of a node visit relative to
+    /// a 4-triangle leaf block test (for tuning it; the default is `bvh::node_cost`).
+    pub fn build_tuned(mesh: &Mesh, params: obvhs::BvhBuildParams, c_node: f32) -> Accel {
         let n = mesh.positions.len();
         // Triangles with an out-of-range index, a non-finite vertex or zero area are left out
         // of the BVH entirely, so no traversal or build step ever sees them.
@@ -93,12 +99,28 @@ impl Accel {
             .map(|(i, t)| ([mesh.positions[t[0] as usize], mesh.positions[t[1] as usize], mesh.positions[t[2] as usize]], i as u32))
             .filter(|(p, _)| !triangle::is_degenerate(p[0], p[1], p[2]))
             .unzip();
-        Accel { bvh: bvh::Bvh::build(tris, valid, params) }
+        Accel { bvh: bvh::Bvh::build(tris, valid, params, c_node) }
     }
 
     /// Number of CWBVH nodes (0 for a mesh without a single valid triangle).
     pub fn node_count(&self) -> usize {
         self.bvh.node_count()
+    }
+
+    /// Whether traversal uses the AVX2 node test (see [`bvh::Bvh::set_avx2`]): `enable`
+    /// false forces the SSE2 one, for tests and A/B benchmarks.
+    pub fn set_avx2(&mut self, enable: bool) -> bool {
+        self.bvh.set_avx2(enable)
+    }
+
+    /// Shape of the BVH (node count, average fill).
+    pub fn bvh_shape(&self) -> bvh::BvhShape {
+        self.bvh.shape()
+    }
+
+    /// [`Accel::intersect`], counting node visits and leaf block tests (statistics).
+    pub fn intersect_counted(&self, ray: &Ray, tmax: f32, counts: &mut bvh::TraversalCounts) -> Option<Hit> {
+        self.bvh.intersect_counted(ray.origin, ray.dir, tmax, counts).map(|(t, prim, b1, b2)| Hit { t, prim, bary: Vec2::new(b1, b2) })
     }
 
     /// Closest hit with t in (0, tmax).

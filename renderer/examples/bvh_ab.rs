@@ -1,0 +1,73 @@
+//! A/B of BVH variants in one process, single-thread, interleaved run by run (best and median
+//! of `REPS` runs, per CPU second of the tracing thread), with node visits and block tests per
+//! ray. Each variant is a node cost for the wide collapse (`Accel::build_tuned`), optionally
+//! followed by `:sse2` to force the SSE2 node test (`:` for the default) and by an obvhs build
+//! preset (`:fast`, `:medium`, `:slow`; `very_fast` by default), e.g.
+//! `REPS=7 cargo run --release -p renderer --example bvh_ab -- 3:sse2 3 4 3::slow`.
+
+use renderer::bench::{displaced_sphere, thread_cpu_seconds, trace, RayBatch, SphereStyle};
+use renderer::geometry::bvh::{default_build_params, TraversalCounts};
+use renderer::geometry::Accel;
+use renderer::scene::Scene;
+use std::path::Path;
+
+fn main() {
+    let variants: Vec<String> = std::env::args().skip(1).collect();
+    let reps: usize = std::env::var("REPS").ok().and_then(|s| s.parse().ok()).unwrap_or(7);
+    let ws = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf();
+    let scene = Scene::load(&ws.join("scenes/cornell-box/scene.toml")).expect("scene");
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    for (name, mesh) in [("cornell", scene.mesh.clone()), ("sphere", displaced_sphere(230, 230, SphereStyle::Bench))] {
+        let cam = RayBatch::camera(&mesh, 500_000, 1);
+        let rnd = RayBatch::random_in_bounds(&mesh, 500_000, 2);
+        let accels: Vec<Accel> = variants
+            .iter()
+            .map(|v| {
+                let mut parts = v.split(':');
+                let c = parts.next().unwrap_or("");
+                let isa = parts.next().unwrap_or("");
+                let params = match parts.next().unwrap_or("") {
+                    "" | "very_fast" => default_build_params(),
+                    "fastest" => obvhs::BvhBuildParams::fastest_build(),
+                    "fast" => obvhs::BvhBuildParams::fast_build(),
+                    "medium" => obvhs::BvhBuildParams::medium_build(),
+                    "slow" => obvhs::BvhBuildParams::slow_build(),
+                    p => panic!("unknown obvhs preset {p}"),
+                };
+                let mut a = Accel::build_tuned(&mesh, params, c.parse().expect("variant: a node cost"));
+                a.set_avx2(isa != "sse2");
+                a
+            })
+            .collect();
+        for (v, a) in variants.iter().zip(&accels) {
+            let s = a.bvh_shape();
+            print!("{name} [{v}]: {} nodes, fill {:.2}, {} blocks;", s.nodes, s.avg_fill, s.blocks);
+            for (set, batch) in [("camera", &cam), ("random", &rnd)] {
+                let mut c = TraversalCounts::default();
+                for i in 0..batch.len() {
+                    a.intersect_counted(&batch.ray(i), batch.tmax[i], &mut c);
+                }
+                print!(" {set} {:.2} nodes {:.2} blocks/ray;", c.nodes as f64 / c.rays as f64, c.blocks as f64 / c.rays as f64);
+            }
+            println!();
+        }
+        for (set, batch) in [("camera", &cam), ("random", &rnd)] {
+            let mut times = vec![Vec::new(); accels.len()];
+            for _ in 0..reps {
+                for (i, a) in accels.iter().enumerate() {
+                    let s = pool.install(|| {
+                        let c0 = thread_cpu_seconds().unwrap();
+                        let r = trace(a, batch, 0);
+                        std::hint::black_box(r);
+                        thread_cpu_seconds().unwrap() - c0
+                    });
+                    times[i].push(batch.len() as f64 / s * 1e-6);
+                }
+            }
+            for (v, t) in variants.iter().zip(&mut times) {
+                t.sort_by(f64::total_cmp);
+                println!("  {name} {set} [{v}]: best {:.2} median {:.2} Mrays/s", t[t.len() - 1], t[t.len() / 2]);
+            }
+        }
+    }
+}
