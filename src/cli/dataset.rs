@@ -161,16 +161,18 @@ pub fn run(a: DatasetArgs) -> Result<()> {
             pb.inc(1);
             continue;
         }
-        if !loaded.contains_key(&job.scene) {
-            let mut scene = Scene::load(&paths[job.scene])?;
-            scene.camera.width = w;
-            scene.camera.height = h;
-            let orig = Original::of(&scene);
-            loaded.insert(job.scene, (scene, orig));
-        }
         // `randomize` sets everything a shot changes from `orig`, so a shot does not depend on
         // which shots of the scene came before it.
-        let (scene, orig) = loaded.get_mut(&job.scene).unwrap();
+        let (scene, orig) = match loaded.entry(job.scene) {
+            std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+            std::collections::hash_map::Entry::Vacant(e) => {
+                let mut scene = Scene::load(&paths[job.scene])?;
+                scene.camera.width = w;
+                scene.camera.height = h;
+                let orig = Original::of(&scene);
+                e.insert((scene, orig))
+            }
+        };
         let shot_seed = mix64(a.seed ^ mix64(job.scene as u64 * 7919 + job.shot as u64));
         let params = randomize(scene, orig, &name, job.shot, shot_seed);
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
