@@ -5,7 +5,7 @@
 //! once with AVX2 where the CPU has it (detected at run time), else four at a time with SSE2,
 //! bit-identically — whose leaves (up to 16 triangles,
 //! chosen by the surface area heuristic) are blocks of four triangles stored side by side and
-//! tested together (`Tri4`). Traversal visits children nearest first, prefetches the ones it
+//! tested together (`Tri4`; under AVX2 two blocks at a time). Traversal visits children nearest first, prefetches the ones it
 //! stacks, and skips any stacked subtree that starts beyond the closest hit found so far.
 //!
 //! Why not obvhs's own CWBVH traversal (the previous version, 0.41–0.45× Embree): its node test
@@ -40,8 +40,10 @@ const LEAF_CAP: u32 = 16;
 /// Measured on the displaced sphere (`examples/bvh_ab.rs`, docs/performance.md): 1 gives many
 /// one-block leaves (38k leaves, nodes 6.9 of 8 full, 7.9 node visits per random ray); 3–5 give
 /// fuller leaves and fewer nodes (3.4k at 3, 7.3 visits) and trace ~10% faster, within noise of
-/// each other.
-pub const C_NODE: f32 = 3.0;
+/// each other with one-block leaf tests. With AVX2's two-block leaf test (`avx2::tri8_test`),
+/// which makes big leaves cheaper, 5 (2.5k nodes, 7.0 visits, 4.1 blocks per random ray) was
+/// 2–4% faster than 3 in three A/B runs.
+pub const C_NODE: f32 = 5.0;
 /// The node cost for meshes of at most `SMALL_MESH` triangles, whose BVH stays in cache, so a
 /// node visit costs about what a block test does. On the Cornell box (36 triangles), 3 makes
 /// one node of eight leaves, as fast in the ray benchmark but ~7% slower in the integrator
@@ -269,6 +271,18 @@ impl Bvh {
         }
     }
 
+    /// Under AVX2, whether leaves are tested two `Tri4` blocks at a time (the default) or one
+    /// (for tests and A/B benchmarks: both give identical results); false without AVX2.
+    pub fn set_tri8(&mut self, enable: bool) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(isa) = &mut self.avx2 {
+            isa.tri8 = enable;
+            return enable;
+        }
+        let _ = enable;
+        false
+    }
+
     pub fn shape(&self) -> BvhShape {
         let children = self.nodes.iter().flat_map(|n| n.child).filter(|&c| c != u32::MAX);
         let (mut filled, mut leaves) = (0, 0);
@@ -411,15 +425,8 @@ impl Bvh {
             } else {
                 let first = (cur & ((1 << BLOCK_BITS) - 1)) as usize;
                 let n = ((cur & !LEAF_BIT) >> BLOCK_BITS) as usize + 1;
-                for blk in &self.blocks[first..first + n] {
-                    probe.block();
-                    if let Some(h) = tri4_test(blk, r, tmax) {
-                        tmax = h.0;
-                        *best = Some(h);
-                        if ANY {
-                            return;
-                        }
-                    }
+                if isa.leaf_test::<ANY, P>(&self.blocks[first..first + n], r, &mut tmax, best, probe) {
+                    return;
                 }
             }
             // Pop the next subtree that may still hold a closer hit.
@@ -469,6 +476,42 @@ trait NodeTest: Copy {
     /// Hit mask and conservative entry distances of the eight children of `node` for the ray
     /// segment (0, tmax).
     fn node_test(self, node: &Node, r: &RayData, tmax: f32) -> (u32, [f32; W]);
+
+    /// Tests the blocks of a leaf in order, each against the closest hit so far (`tmax`,
+    /// `best`); true where `ANY` and a hit was found (traversal then stops).
+    #[inline(always)]
+    fn leaf_test<const ANY: bool, P: Probe>(
+        self,
+        blocks: &[Tri4],
+        r: &RayData,
+        tmax: &mut f32,
+        best: &mut Option<HitRec>,
+        probe: &mut P,
+    ) -> bool {
+        leaf_test_tri4::<ANY, P>(blocks, r, tmax, best, probe)
+    }
+}
+
+/// `NodeTest::leaf_test` one `Tri4` block at a time.
+#[inline(always)]
+fn leaf_test_tri4<const ANY: bool, P: Probe>(
+    blocks: &[Tri4],
+    r: &RayData,
+    tmax: &mut f32,
+    best: &mut Option<HitRec>,
+    probe: &mut P,
+) -> bool {
+    for blk in blocks {
+        probe.block();
+        if let Some(h) = tri4_test(blk, r, *tmax) {
+            *tmax = h.0;
+            *best = Some(h);
+            if ANY {
+                return true;
+            }
+        }
+    }
+    false
 }
 
 /// The baseline node test: glam's `Vec4`, SSE2 on x86-64 (scalar or NEON elsewhere).
@@ -484,16 +527,19 @@ impl NodeTest for Sse2 {
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{Node, NodeTest, RayData, SLAB_WIDEN, W};
+    use super::{tri4_test, HitRec, Node, NodeTest, Probe, RayData, Tri4, SLAB_WIDEN, W};
     use std::arch::x86_64::*;
 
-    /// Proof that this CPU has AVX2 and FMA: only `detect` makes one.
+    /// Proof that this CPU has AVX2 and FMA: only `detect` makes one. `tri8`: leaves are
+    /// tested two `Tri4` blocks at a time (`tri8_test`), else one at a time.
     #[derive(Clone, Copy)]
-    pub(super) struct Avx2(());
+    pub(super) struct Avx2 {
+        pub(super) tri8: bool,
+    }
 
     impl Avx2 {
         pub(super) fn detect() -> Option<Avx2> {
-            (is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")).then_some(Avx2(()))
+            (is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")).then_some(Avx2 { tri8: true })
         }
     }
 
@@ -524,6 +570,164 @@ mod avx2 {
                 _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32
             };
             (mask, tnear)
+        }
+
+        #[inline(always)]
+        fn leaf_test<const ANY: bool, P: Probe>(
+            self,
+            blocks: &[Tri4],
+            r: &RayData,
+            tmax: &mut f32,
+            best: &mut Option<HitRec>,
+            probe: &mut P,
+        ) -> bool {
+            if !self.tri8 {
+                return super::leaf_test_tri4::<ANY, P>(blocks, r, tmax, best, probe);
+            }
+            let mut pairs = blocks.chunks_exact(2);
+            for pair in &mut pairs {
+                probe.block();
+                probe.block();
+                // SAFETY: as in `node_test`.
+                if let Some(h) = unsafe { tri8_test::<ANY>(&pair[0], &pair[1], r, *tmax) } {
+                    *tmax = h.0;
+                    *best = Some(h);
+                    if ANY {
+                        return true;
+                    }
+                }
+            }
+            super::leaf_test_tri4::<ANY, P>(pairs.remainder(), r, tmax, best, probe)
+        }
+    }
+
+    /// `tri4_test(a)` and then `tri4_test(b)` against the closer `tmax` (with `ANY`: `b` only
+    /// where `a` misses), in one pass of 256-bit operations: lanes 0..4 are `a`'s triangles,
+    /// 4..8 `b`'s, and every lane computes exactly `tri4_test`'s operations, so the result is
+    /// bit-identical to the two `Tri4` tests (which remain the path where an edge function
+    /// rounds to zero). The only order-dependent step of the sequence, `b` being tested
+    /// against `a`'s hit distance, is redone for `b`'s lanes when `a` hits.
+    ///
+    /// # Safety
+    /// Only with AVX2 (an `Avx2` exists).
+    #[inline(always)]
+    unsafe fn tri8_test<const ANY: bool>(a: &Tri4, b: &Tri4, r: &RayData, tmax: f32) -> Option<HitRec> {
+        // SAFETY: the caller has checked AVX2; the loads read whole `Vec4`s of `a` and `b`
+        // and the stores write arrays of `W` floats.
+        unsafe {
+            let [kx, ky, kz] = r.k;
+            // Macros, not closures: a closure is a function of its own, compiled without
+            // `query_avx2`'s target features unless inlined (every intrinsic then a call).
+            macro_rules! splat {
+                ($v:expr) => {
+                    _mm256_set1_ps($v.x)
+                };
+            }
+            let (ox, oy, oz) = (splat!(r.o[kx]), splat!(r.o[ky]), splat!(r.o[kz]));
+            let (sx, sy, sz) = (splat!(r.s[0]), splat!(r.s[1]), splat!(r.s[2]));
+            macro_rules! load {
+                ($vtx:expr, $axis:expr) => {
+                    _mm256_set_m128(_mm_loadu_ps(b.v[$vtx][$axis].as_ref().as_ptr()), _mm_loadu_ps(a.v[$vtx][$axis].as_ref().as_ptr()))
+                };
+            }
+            macro_rules! sheared {
+                ($vtx:expr) => {{
+                    let az = _mm256_sub_ps(load!($vtx, kz), oz);
+                    let x = _mm256_sub_ps(_mm256_sub_ps(load!($vtx, kx), ox), _mm256_mul_ps(sx, az));
+                    let y = _mm256_sub_ps(_mm256_sub_ps(load!($vtx, ky), oy), _mm256_mul_ps(sy, az));
+                    (x, y, _mm256_mul_ps(sz, az))
+                }};
+            }
+            let (ax, ay, az) = sheared!(0);
+            let (bx, by, bz) = sheared!(1);
+            let (cx, cy, cz) = sheared!(2);
+            let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+            let v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+            let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+            let zero = _mm256_setzero_ps();
+            let eq0 = _mm256_or_ps(
+                _mm256_or_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(u, zero), _mm256_cmp_ps::<_CMP_EQ_OQ>(v, zero)),
+                _mm256_cmp_ps::<_CMP_EQ_OQ>(w, zero),
+            );
+            if _mm256_movemask_ps(eq0) != 0 {
+                let ha = tri4_test(a, r, tmax);
+                if ANY && ha.is_some() {
+                    return ha;
+                }
+                let hb = tri4_test(b, r, ha.map_or(tmax, |h| h.0));
+                return hb.or(ha);
+            }
+            macro_rules! lt {
+                ($x:expr) => {
+                    _mm256_cmp_ps::<_CMP_LT_OQ>($x, zero)
+                };
+            }
+            macro_rules! gt {
+                ($x:expr) => {
+                    _mm256_cmp_ps::<_CMP_GT_OQ>($x, zero)
+                };
+            }
+            let neg = _mm256_or_ps(_mm256_or_ps(lt!(u), lt!(v)), lt!(w));
+            let pos = _mm256_or_ps(_mm256_or_ps(gt!(u), gt!(v)), gt!(w));
+            let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
+            let t_scaled = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(u, az), _mm256_mul_ps(v, bz)), _mm256_mul_ps(w, cz));
+            let sign = _mm256_set1_ps(-0.0);
+            let ts = _mm256_blendv_ps(t_scaled, _mm256_xor_ps(t_scaled, sign), lt!(det));
+            let dabs = _mm256_andnot_ps(sign, det);
+            let t = _mm256_div_ps(t_scaled, det);
+            macro_rules! in_range {
+                ($tm:expr) => {{
+                    let tm = $tm;
+                    _mm256_and_ps(
+                        _mm256_and_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(ts, _mm256_mul_ps(tm, dabs)), gt!(t)),
+                        _mm256_cmp_ps::<_CMP_LT_OQ>(t, tm),
+                    )
+                }};
+            }
+            let ok = _mm256_andnot_ps(
+                _mm256_and_ps(neg, pos),
+                _mm256_and_ps(
+                    _mm256_and_ps(gt!(dabs), _mm256_cmp_ps::<_CMP_LT_OQ>(dabs, _mm256_set1_ps(f32::INFINITY))),
+                    _mm256_and_ps(gt!(ts), in_range!(_mm256_set1_ps(tmax))),
+                ),
+            );
+            let mut m = _mm256_movemask_ps(ok) as u32;
+            if m == 0 {
+                return None;
+            }
+            let mut ta = [0.0f32; W];
+            _mm256_storeu_ps(ta.as_mut_ptr(), t);
+            let closest = |mut m: u32| {
+                let mut lane = m.trailing_zeros() as usize;
+                m &= m - 1;
+                while m != 0 {
+                    let l = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    if ta[l] < ta[lane] {
+                        lane = l;
+                    }
+                }
+                lane
+            };
+            if m & 0xf != 0 && m & 0xf0 != 0 {
+                // `b`'s lanes must also be in range of `a`'s hit, as when tested after it.
+                let ta_best = ta[closest(m & 0xf)];
+                if ANY {
+                    m &= 0xf;
+                } else {
+                    m &= 0xf | _mm256_movemask_ps(in_range!(_mm256_set1_ps(ta_best))) as u32;
+                }
+            }
+            let lane = closest(m);
+            let mut da = [0.0f32; W];
+            let mut va = [0.0f32; W];
+            let mut wa = [0.0f32; W];
+            _mm256_storeu_ps(da.as_mut_ptr(), det);
+            _mm256_storeu_ps(va.as_mut_ptr(), v);
+            _mm256_storeu_ps(wa.as_mut_ptr(), w);
+            let inv = 1.0 / da[lane];
+            let id = if lane < 4 { a.id[lane] } else { b.id[lane - 4] };
+            Some((ta[lane], id, va[lane] * inv, wa[lane] * inv))
         }
     }
 

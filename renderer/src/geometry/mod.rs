@@ -113,6 +113,11 @@ impl Accel {
         self.bvh.set_avx2(enable)
     }
 
+    /// Whether AVX2 traversal tests leaves two blocks at a time (see [`bvh::Bvh::set_tri8`]).
+    pub fn set_tri8(&mut self, enable: bool) -> bool {
+        self.bvh.set_tri8(enable)
+    }
+
     /// Shape of the BVH (node count, average fill).
     pub fn bvh_shape(&self) -> bvh::BvhShape {
         self.bvh.shape()

@@ -290,8 +290,9 @@ fn offset_origin_avoids_self_hits_and_leaks() {
     }
 }
 
-/// The AVX2 node test (used where the CPU has AVX2 and FMA) and the SSE2 one (the x86-64
-/// baseline, and what every other CPU runs) give identical answers: same t, triangle and
+/// The AVX2 node test (used where the CPU has AVX2 and FMA), with leaves tested two blocks at a
+/// time (the default) or one, and the SSE2 one (the x86-64 baseline, and what every other CPU
+/// runs) give identical answers: same t, triangle and
 /// barycentrics bit for bit, and the same shadow-ray answers, on camera rays (a quarter aimed at
 /// shared edges), random rays and short segments, over a displaced sphere and a triangle soup.
 #[test]
@@ -330,9 +331,12 @@ fn avx2_and_sse2_node_tests_agree() {
             eprintln!("this CPU has no AVX2 and FMA: only the SSE2 node test ran");
             return;
         }
-        let avx2 = run(&accel);
-        for (i, (a, b)) in sse2.iter().zip(&avx2).enumerate() {
-            assert_eq!(a, b, "ray {i}: {:?} tmax {}", batch.ray(i), batch.tmax[i]);
+        for tri8 in [true, false] {
+            accel.set_tri8(tri8);
+            let avx2 = run(&accel);
+            for (i, (a, b)) in sse2.iter().zip(&avx2).enumerate() {
+                assert_eq!(a, b, "tri8 {tri8}, ray {i}: {:?} tmax {}", batch.ray(i), batch.tmax[i]);
+            }
         }
     }
 }
