@@ -56,7 +56,7 @@ impl DescriptorFile {
             [a, b] => (a, b),
             _ => return Err(bad(format!("tensor `descriptors` has data_offsets {offsets:?}"))),
         };
-        if bytes != end.checked_sub(start) || Some(8 + n + end) != Some(len) {
+        if bytes != end.checked_sub(start) || (8 + n).checked_add(end) != Some(len) {
             return Err(bad(format!("tensor `descriptors` {shape:?} does not match its bytes {start}..{end} in a file of {len}")));
         }
         Ok(DescriptorFile {
