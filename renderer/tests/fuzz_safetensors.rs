@@ -1,4 +1,4 @@
-//! Fuzz tests of the film crate's safetensors reader, `Descriptors::read_safetensors` (the
+//! Fuzz tests of the film crate's safetensors readers, `Descriptors::read_safetensors` and `DescriptorFile` (the
 //! per-sample path descriptors of a training shot), fed mutated copies of a descriptor file and
 //! arbitrary bytes behind a header length. It must return `Ok` or an error, never panic, hang or
 //! allocate beyond the cap (the harness: fuzz_support/mod.rs). The denoiser's weight files have
@@ -8,7 +8,8 @@ mod fuzz_support;
 
 use fuzz_support::*;
 use proptest::prelude::*;
-use renderer::film::descriptors::Descriptors;
+use renderer::film::descriptors::{Descriptors, FIELDS};
+use renderer::film::{DescriptorFile, Precision};
 
 #[global_allocator]
 static ALLOC: CappedAlloc = CappedAlloc;
@@ -30,6 +31,19 @@ fn mutated_descriptor_files_read_or_fail_cleanly() {
         guarded(tally, label(&src, &edits), move || Descriptors::read_safetensors(&p))
     });
 
+    // Training's in-place reader: a mutated file opens or fails, and every record of an opened
+    // one reads or fails, in f32 and in bf16.
+    for (precision, seed) in [(Precision::F32, 23), (Precision::Bf16, 24)] {
+        let src = dir.join(format!("descriptors_{precision:?}.safetensors"));
+        d.write_safetensors_as(&src, precision).unwrap();
+        let original = std::fs::read(&src).unwrap();
+        run_cases("descriptor file", 128, seed, Inputs::Mutated, &mutated(1), |tally, (_, edits)| {
+            std::fs::write(&case, apply_all(&original, &edits)).unwrap();
+            let p = case.clone();
+            guarded(tally, label(&src, &edits), move || read_every_record(&p))
+        });
+    }
+
     // A header of arbitrary text under a length that may or may not match it.
     let header = prop_oneof![prop::collection::vec(any::<u8>(), 0..512), token_soup(SAFETENSORS_TOKENS, 48),];
     let input = (header, any::<bool>(), any::<u64>(), prop::collection::vec(any::<u8>(), 0..256));
@@ -50,6 +64,16 @@ fn mutated_descriptor_files_read_or_fail_cleanly() {
             move || Descriptors::read_safetensors(&p),
         )
     });
+}
+
+/// Opens a file with `DescriptorFile` and reads every sample of every pixel.
+fn read_every_record(p: &std::path::Path) -> Result<(), film::Error> {
+    let f = DescriptorFile::open(p)?;
+    let mut out = vec![0.0; f.spp as usize * FIELDS];
+    for i in 0..(f.width * f.height) as usize {
+        f.read_prefix(i, f.spp as usize, &mut out)?;
+    }
+    Ok(())
 }
 
 const SAFETENSORS_TOKENS: &[&str] = &[
