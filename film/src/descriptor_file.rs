@@ -5,7 +5,6 @@
 
 use crate::descriptors::FIELDS;
 use crate::{Error, Precision, Result};
-use half::bf16;
 use std::fs::File;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -91,10 +90,7 @@ impl DescriptorFile {
         let mut buf = vec![0u8; s * FIELDS * b];
         let at = self.data_start + (i * spp * FIELDS * b) as u64;
         read_at(&self.file, &mut buf, at).map_err(|e| Error::io(&self.path, e))?;
-        match self.precision {
-            Precision::F32 => buf.chunks_exact(4).zip(out).for_each(|(c, o)| *o = f32::from_le_bytes([c[0], c[1], c[2], c[3]])),
-            Precision::Bf16 => buf.chunks_exact(2).zip(out).for_each(|(c, o)| *o = bf16::from_le_bytes([c[0], c[1]]).to_f32()),
-        }
+        self.precision.decode(&buf, out);
         Ok(())
     }
 }

@@ -44,6 +44,14 @@ impl Precision {
             Precision::Bf16 => 2,
         }
     }
+
+    /// Little-endian values of this precision into `out` (as many as both hold).
+    pub fn decode(self, bytes: &[u8], out: &mut [f32]) {
+        match self {
+            Precision::F32 => bytes.chunks_exact(4).zip(out).for_each(|(c, o)| *o = f32::from_le_bytes([c[0], c[1], c[2], c[3]])),
+            Precision::Bf16 => bytes.chunks_exact(2).zip(out).for_each(|(c, o)| *o = bf16::from_le_bytes([c[0], c[1]]).to_f32()),
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -120,10 +128,9 @@ impl Descriptors {
                 format!("tensor `descriptors` must be f32 or bf16 [H, W, S, {FIELDS}], found {:?} {:?}", t.dtype(), shape),
             ));
         }
-        let data = match t.dtype() {
-            safetensors::Dtype::BF16 => t.data().chunks_exact(2).map(|b| bf16::from_le_bytes([b[0], b[1]]).to_f32()).collect(),
-            _ => t.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect(),
-        };
+        let precision = if t.dtype() == safetensors::Dtype::BF16 { Precision::Bf16 } else { Precision::F32 };
+        let mut data = vec![0.0f32; t.data().len() / precision.bytes()];
+        precision.decode(t.data(), &mut data);
         Ok(Descriptors { width: shape[1] as u32, height: shape[0] as u32, spp: shape[2] as u32, data })
     }
 }

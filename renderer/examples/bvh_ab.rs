@@ -7,7 +7,7 @@
 //! `REPS=7 cargo run --release -p renderer --example bvh_ab -- 3:sse2 3 4 3::slow`.
 
 use renderer::bench::{displaced_sphere, thread_cpu_seconds, trace, RayBatch, SphereStyle};
-use renderer::geometry::bvh::{default_build_params, TraversalCounts};
+use renderer::geometry::bvh::default_build_params;
 use renderer::geometry::Accel;
 use renderer::scene::Scene;
 use std::path::Path;
@@ -45,11 +45,8 @@ fn main() {
             let s = a.bvh_shape();
             print!("{name} [{v}]: {} nodes, fill {:.2}, {} blocks;", s.nodes, s.avg_fill, s.blocks);
             for (set, batch) in [("camera", &cam), ("random", &rnd)] {
-                let mut c = TraversalCounts::default();
-                for i in 0..batch.len() {
-                    a.intersect_counted(&batch.ray(i), batch.tmax[i], &mut c);
-                }
-                print!(" {set} {:.2} nodes {:.2} blocks/ray;", c.nodes as f64 / c.rays as f64, c.blocks as f64 / c.rays as f64);
+                let (nodes, blocks) = batch.traversal_per_ray(a);
+                print!(" {set} {nodes:.2} nodes {blocks:.2} blocks/ray;");
             }
             println!();
         }

@@ -2,7 +2,7 @@
 //! `cargo run --release -p renderer --example bvh_quick [rays]`.
 
 use renderer::bench::{displaced_sphere, embree_script, ray_bench, EmbreeSetup, RayBatch, SphereStyle};
-use renderer::geometry::{bvh::TraversalCounts, Accel};
+use renderer::geometry::Accel;
 use renderer::scene::Scene;
 use std::path::Path;
 use tools_venv::embree_python;
@@ -23,11 +23,8 @@ fn main() {
             shape.nodes, shape.avg_fill, shape.leaves, shape.blocks
         );
         for (set, batch) in [("camera", &cam), ("random", &rnd)] {
-            let mut c = TraversalCounts::default();
-            for i in 0..batch.len() {
-                accel.intersect_counted(&batch.ray(i), batch.tmax[i], &mut c);
-            }
-            print!(" {set}: {:.2} node visits, {:.2} block tests;", c.nodes as f64 / c.rays as f64, c.blocks as f64 / c.rays as f64);
+            let (nodes, blocks) = batch.traversal_per_ray(&accel);
+            print!(" {set}: {nodes:.2} node visits, {blocks:.2} block tests;");
         }
         println!();
         let report = ray_bench(&mesh, &[("camera", &cam), ("random", &rnd)], 1, 3, Some(&setup)).expect("bench runs");

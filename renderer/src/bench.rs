@@ -38,6 +38,16 @@ impl RayBatch {
         Ray::new(self.origins[i], self.dirs[i])
     }
 
+    /// Node visits and leaf-block tests per ray of `accel`'s closest-hit queries on this batch.
+    pub fn traversal_per_ray(&self, accel: &Accel) -> (f64, f64) {
+        let mut c = crate::geometry::bvh::TraversalCounts::default();
+        for i in 0..self.len() {
+            accel.intersect_counted(&self.ray(i), self.tmax[i], &mut c);
+        }
+        let rays = c.rays.max(1) as f64;
+        (c.nodes as f64 / rays, c.blocks as f64 / rays)
+    }
+
     /// `n` primary rays of a pinhole camera looking at the mesh's bounding-box centre from a
     /// fixed oblique direction (40° vertical field of view, square film, one jittered ray per
     /// film position). A quarter of them are instead aimed from the same eye exactly at points
