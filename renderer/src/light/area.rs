@@ -17,6 +17,10 @@ pub(crate) struct TriangleLight {
     pub two_sided: bool,
     /// The triangle's `Mesh::geometric_normal`, kept here because every light sample needs it.
     pub normal: Vec3,
+    /// The triangle's vertices, kept here for the same reason.
+    pub vertices: [Vec3; 3],
+    /// `emission.max_element()`, which every connection checks against its pdf.
+    pub max_emission: f32,
 }
 
 impl TriangleLight {
@@ -49,7 +53,7 @@ impl TriangleLight {
             return None;
         }
         let pdf = select_pmf * (dist2 / (self.area * cos.abs()));
-        let ratio = self.emission.max_element() / pdf;
+        let ratio = self.max_emission / pdf;
         if !(pdf > 0.0) || !pdf.is_finite() || !ratio.is_finite() || !is_finite3(wi) {
             return None;
         }
