@@ -129,13 +129,13 @@ impl Accel {
     }
 
     /// Closest hit with t in (0, tmax).
-    #[inline]
+    #[inline(always)]
     pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<Hit> {
         self.bvh.intersect(ray.origin, ray.dir, tmax).map(|(t, prim, b1, b2)| Hit { t, prim, bary: Vec2::new(b1, b2) })
     }
 
     /// Any hit with t in (0, tmax) (shadow rays).
-    #[inline]
+    #[inline(always)]
     pub fn occluded(&self, ray: &Ray, tmax: f32) -> bool {
         self.bvh.occluded(ray.origin, ray.dir, tmax)
     }
@@ -156,6 +156,7 @@ const MIN_MAGNITUDE: f32 = 1e-8;
 /// Moves `p` off the surface along the geometric normal `ng` on the side of `dir`, by an amount
 /// that scales with |p| (Wächter & Binder, Ray Tracing Gems ch. 6), so spawned rays neither
 /// re-hit their own triangle nor tunnel through thin geometry at scene scales from 1e-3 to 1e4.
+#[inline]
 pub fn offset_ray_origin(p: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
     if !p.is_finite() || !ng.is_finite() {
         return p;

@@ -34,6 +34,7 @@ impl TriangleLight {
     /// with geometric normal `n_light` seen from `p`. `None` when the connection is useless:
     /// coincident points, grazing angles, the non-emitting side, or a ratio radiance/pdf that
     /// would overflow.
+    #[inline]
     pub fn connect(&self, p: Vec3, p_light: Vec3, n_light: Vec3, select_pmf: f32) -> Option<(Vec3, f32, f32)> {
         let d = p_light - p;
         let dist2 = d.length_squared();
