@@ -308,7 +308,7 @@ impl Bvh {
     }
 
     /// Closest hit with t in (0, tmax): (t, original triangle index, b1, b2).
-    #[inline]
+    #[inline(always)]
     pub fn intersect(&self, o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, u32, f32, f32)> {
         #[cfg(target_arch = "x86_64")]
         if let Some(isa) = self.avx2 {
@@ -319,7 +319,7 @@ impl Bvh {
     }
 
     /// Any hit with t in (0, tmax).
-    #[inline]
+    #[inline(always)]
     pub fn occluded(&self, o: Vec3, d: Vec3, tmax: f32) -> bool {
         #[cfg(target_arch = "x86_64")]
         if let Some(isa) = self.avx2 {

@@ -129,13 +129,13 @@ impl Accel {
     }
 
     /// Closest hit with t in (0, tmax).
-    #[inline]
+    #[inline(always)]
     pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<Hit> {
         self.bvh.intersect(ray.origin, ray.dir, tmax).map(|(t, prim, b1, b2)| Hit { t, prim, bary: Vec2::new(b1, b2) })
     }
 
     /// Any hit with t in (0, tmax) (shadow rays).
-    #[inline]
+    #[inline(always)]
     pub fn occluded(&self, ray: &Ray, tmax: f32) -> bool {
         self.bvh.occluded(ray.origin, ray.dir, tmax)
     }
@@ -156,31 +156,40 @@ const MIN_MAGNITUDE: f32 = 1e-8;
 /// Moves `p` off the surface along the geometric normal `ng` on the side of `dir`, by an amount
 /// that scales with |p| (Wächter & Binder, Ray Tracing Gems ch. 6), so spawned rays neither
 /// re-hit their own triangle nor tunnel through thin geometry at scene scales from 1e-3 to 1e4.
+#[inline]
 pub fn offset_ray_origin(p: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
     if !p.is_finite() || !ng.is_finite() {
         return p;
     }
     let n = if ng.dot(dir) < 0.0 { -ng } else { ng };
     let mag = p.abs().max_element().max(MIN_MAGNITUDE);
-    let mut out = p;
-    for i in 0..3 {
-        let pi = p[i];
-        out[i] = if pi.abs() < mag * ORIGIN_FRACTION {
-            pi + FLOAT_SCALE * mag * n[i]
-        } else {
-            // Stepping the bit pattern moves by whole ULPs whatever the magnitude; the step is
-            // applied away from zero when n_i points away from zero, towards it otherwise.
-            let steps = (INT_SCALE * n[i]) as i32;
-            let bits = pi.to_bits() as i32;
-            let stepped = f32::from_bits(if pi < 0.0 { bits - steps } else { bits + steps } as u32);
-            if stepped.is_finite() {
-                stepped
-            } else {
-                pi
-            }
-        };
+    let near_zero = mag * ORIGIN_FRACTION;
+    let float_step = FLOAT_SCALE * mag;
+    Vec3::new(
+        offset_component(p.x, n.x, near_zero, float_step),
+        offset_component(p.y, n.y, near_zero, float_step),
+        offset_component(p.z, n.z, near_zero, float_step),
+    )
+}
+
+/// One coordinate of [`offset_ray_origin`]. Both candidate offsets are computed and one is
+/// selected, without a branch: which one applies depends on the hit point, so a branch on it
+/// is mispredicted often.
+#[inline(always)]
+fn offset_component(pi: f32, ni: f32, near_zero: f32, float_step: f32) -> f32 {
+    let by_float = pi + float_step * ni;
+    // Stepping the bit pattern moves by whole ULPs whatever the magnitude; the step is applied
+    // away from zero when n_i points away from zero, towards it otherwise. Wrapping arithmetic
+    // is what an overflowing step did in release builds before (a huge `ng` only).
+    let steps = (INT_SCALE * ni) as i32;
+    let steps = if pi < 0.0 { steps.wrapping_neg() } else { steps };
+    let stepped = f32::from_bits((pi.to_bits() as i32).wrapping_add(steps) as u32);
+    let by_ulps = if stepped.is_finite() { stepped } else { pi };
+    if pi.abs() < near_zero {
+        by_float
+    } else {
+        by_ulps
     }
-    out
 }
 
 impl Mesh {

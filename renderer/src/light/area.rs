@@ -17,6 +17,10 @@ pub(crate) struct TriangleLight {
     pub two_sided: bool,
     /// The triangle's `Mesh::geometric_normal`, kept here because every light sample needs it.
     pub normal: Vec3,
+    /// The triangle's vertices, kept here for the same reason.
+    pub vertices: [Vec3; 3],
+    /// `emission.max_element()`, which every connection checks against its pdf.
+    pub max_emission: f32,
 }
 
 impl TriangleLight {
@@ -30,6 +34,7 @@ impl TriangleLight {
     /// with geometric normal `n_light` seen from `p`. `None` when the connection is useless:
     /// coincident points, grazing angles, the non-emitting side, or a ratio radiance/pdf that
     /// would overflow.
+    #[inline]
     pub fn connect(&self, p: Vec3, p_light: Vec3, n_light: Vec3, select_pmf: f32) -> Option<(Vec3, f32, f32)> {
         let d = p_light - p;
         let dist2 = d.length_squared();
@@ -49,7 +54,7 @@ impl TriangleLight {
             return None;
         }
         let pdf = select_pmf * (dist2 / (self.area * cos.abs()));
-        let ratio = self.emission.max_element() / pdf;
+        let ratio = self.max_emission / pdf;
         if !(pdf > 0.0) || !pdf.is_finite() || !ratio.is_finite() || !is_finite3(wi) {
             return None;
         }

@@ -63,11 +63,10 @@ impl Distribution1D {
         self.cdf.partition_point(|&c| c <= u).saturating_sub(1).min(self.func.len() - 1)
     }
 
-    /// A cell index and its probability; never returns a zero-weight cell.
-    pub fn sample_discrete(&self, u: f32) -> Option<(usize, f32)> {
-        let i = self.find(sanitize_u(u));
-        let pmf = self.pmf(i);
-        (pmf > 0.0).then_some((i, pmf))
+    /// A cell index for discrete sampling, drawn with probability `pmf`; never a zero-weight
+    /// cell. Callers that sample often keep a table of `pmf`, which costs an f64 division.
+    pub fn sample_index(&self, u: f32) -> usize {
+        self.find(sanitize_u(u))
     }
 
     /// A continuous position in [0, 1) and the cell it was drawn from.

@@ -62,6 +62,8 @@ pub struct Lights {
     env: EnvLight,
     /// Over `triangles` followed by the environment (if it is not black). `None` = no lights.
     select: Option<Distribution1D>,
+    /// `select`'s `pmf` of each of its cells, which every light sample and MIS weight needs.
+    select_pmf: Vec<f32>,
 }
 
 impl Lights {
@@ -77,7 +79,15 @@ impl Lights {
             }
             let area = mesh.area(i);
             let normal = mesh.geometric_normal(i);
-            let light = TriangleLight { prim: i as u32, area, emission: mat.emission, two_sided: mat.two_sided_emission, normal };
+            let light = TriangleLight {
+                prim: i as u32,
+                area,
+                emission: mat.emission,
+                two_sided: mat.two_sided_emission,
+                normal,
+                vertices: mesh.triangle(i),
+                max_emission: mat.emission.max_element(),
+            };
             let power = light.power();
             // Zero-area triangles can never be sampled; non-finite emission has no meaningful pdf.
             if !(area > 0.0) || normal == Vec3::ZERO || !(power > 0.0) || !power.is_finite() {
@@ -109,7 +119,8 @@ impl Lights {
             weights.push(env_share);
         }
         let select = Distribution1D::new(weights);
-        Lights { triangles, prim_to_light, env, select }
+        let select_pmf = select.as_ref().map_or(Vec::new(), |s| (0..=triangles.len()).map(|i| s.pmf(i)).collect());
+        Lights { triangles, prim_to_light, env, select, select_pmf }
     }
 
     /// True if there is nothing to sample (no emissive triangle of positive area, black env).
@@ -120,14 +131,18 @@ impl Lights {
     /// Selection probability of the environment.
     fn env_pmf(&self) -> f32 {
         match &self.select {
-            Some(s) if !self.env.is_black() => s.pmf(self.triangles.len()),
+            Some(_) if !self.env.is_black() => self.select_pmf[self.triangles.len()],
             _ => 0.0,
         }
     }
 
     /// Picks a light with `u_select` and a point on it with `u`, as seen from `p`.
     pub fn sample(&self, mesh: &Mesh, p: Vec3, u_select: f32, u: Vec2) -> Option<LightSample> {
-        let (i, pmf) = self.select.as_ref()?.sample_discrete(u_select)?;
+        let i = self.select.as_ref()?.sample_index(u_select);
+        let pmf = self.select_pmf[i];
+        if !(pmf > 0.0) {
+            return None;
+        }
         if i == self.triangles.len() {
             let (wi, pdf) = self.env.sample(u)?;
             let pdf = pmf * pdf;
@@ -137,7 +152,8 @@ impl Lights {
             return useful.then_some(LightSample { wi, dist: f32::INFINITY, radiance, pdf, prim: None });
         }
         let light = &self.triangles[i];
-        let [p0, p1, p2] = mesh.triangle(light.prim as usize);
+        let _ = mesh;
+        let [p0, p1, p2] = light.vertices;
         let b = crate::sampling::square_to_triangle(u);
         let p_light = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
         let (wi, dist, pdf) = light.connect(p, p_light, light.normal, pmf)?;
@@ -149,8 +165,8 @@ impl Lights {
     pub fn pdf_triangle(&self, mesh: &Mesh, prim: u32, p: Vec3, p_light: Vec3, n_light: Vec3) -> f32 {
         let _ = mesh;
         let Some(&li) = self.prim_to_light.get(prim as usize) else { return 0.0 };
-        let (Some(light), Some(select)) = (self.triangles.get(li as usize), &self.select) else { return 0.0 };
-        light.connect(p, p_light, n_light, select.pmf(li as usize)).map_or(0.0, |(_, _, pdf)| pdf)
+        let (Some(light), Some(&pmf)) = (self.triangles.get(li as usize), self.select_pmf.get(li as usize)) else { return 0.0 };
+        light.connect(p, p_light, n_light, pmf).map_or(0.0, |(_, _, pdf)| pdf)
     }
 
     /// Radiance of the environment along world direction `dir` (pointing away from the scene).

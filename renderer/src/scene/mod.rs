@@ -124,6 +124,7 @@ impl Scene {
     }
 
     /// Surface geometry of a hit returned by `accel.intersect(ray, ..)`.
+    #[inline]
     pub fn surface(&self, ray: &Ray, hit: &Hit) -> SurfaceHit {
         let i = hit.prim as usize;
         let [a, b, c] = self.mesh.triangles[i];
