@@ -105,7 +105,7 @@ pub fn trace(scene: &Scene, ray: Ray, rng: &mut Pcg32, max_bounces: u32, russian
                 let w = if depth == 0 || prev_delta {
                     1.0
                 } else {
-                    power_heuristic(prev_pdf, scene.lights.pdf_triangle(&scene.mesh, si.prim, prev_p, si.p, si.ng))
+                    power_heuristic(prev_pdf, scene.lights.pdf_triangle(si.prim, prev_p, si.p, si.ng))
                 };
                 l_diffuse += beta.diffuse * le * w;
                 l_specular += beta.specular * le * w;
@@ -151,7 +151,7 @@ pub fn trace(scene: &Scene, ray: Ray, rng: &mut Pcg32, max_bounces: u32, russian
         let u_select = rng.next_f32();
         let u_light = rng.next_2d();
         if !bsdf.is_delta() {
-            if let Some(ls) = scene.lights.sample(&scene.mesh, si.p, u_select, u_light) {
+            if let Some(ls) = scene.lights.sample(si.p, u_select, u_light) {
                 let wi = frame.to_local(ls.wi);
                 let same_side = (ls.wi.dot(ng) > 0.0) == (wo_world.dot(ng) > 0.0);
                 // Reflection needs the light on the viewer's side of the true surface, and

@@ -137,7 +137,7 @@ impl Lights {
     }
 
     /// Picks a light with `u_select` and a point on it with `u`, as seen from `p`.
-    pub fn sample(&self, mesh: &Mesh, p: Vec3, u_select: f32, u: Vec2) -> Option<LightSample> {
+    pub fn sample(&self, p: Vec3, u_select: f32, u: Vec2) -> Option<LightSample> {
         let i = self.select.as_ref()?.sample_index(u_select);
         let pmf = self.select_pmf[i];
         if !(pmf > 0.0) {
@@ -152,7 +152,6 @@ impl Lights {
             return useful.then_some(LightSample { wi, dist: f32::INFINITY, radiance, pdf, prim: None });
         }
         let light = &self.triangles[i];
-        let _ = mesh;
         let [p0, p1, p2] = light.vertices;
         let b = crate::sampling::square_to_triangle(u);
         let p_light = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
@@ -162,8 +161,7 @@ impl Lights {
 
     /// Density (solid angle, selection included) with which `sample` from `p` would pick point
     /// `p_light` on emissive triangle `prim` (whose geometric normal is `n_light`).
-    pub fn pdf_triangle(&self, mesh: &Mesh, prim: u32, p: Vec3, p_light: Vec3, n_light: Vec3) -> f32 {
-        let _ = mesh;
+    pub fn pdf_triangle(&self, prim: u32, p: Vec3, p_light: Vec3, n_light: Vec3) -> f32 {
         let Some(&li) = self.prim_to_light.get(prim as usize) else { return 0.0 };
         let (Some(light), Some(&pmf)) = (self.triangles.get(li as usize), self.select_pmf.get(li as usize)) else { return 0.0 };
         light.connect(p, p_light, n_light, pmf).map_or(0.0, |(_, _, pdf)| pdf)

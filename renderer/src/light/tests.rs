@@ -82,7 +82,7 @@ fn env_map_sampling_matches_env_pdf_chi_square() {
     let mut counts = vec![0u64; bw * bh];
     let mut rng = Pcg32::new(11, 3);
     for _ in 0..n {
-        let s = lights.sample(&Mesh::default(), Vec3::ZERO, rng.next_f32(), rng.next_2d()).expect("env sample");
+        let s = lights.sample(Vec3::ZERO, rng.next_f32(), rng.next_2d()).expect("env sample");
         assert!(s.prim.is_none() && s.dist == f32::INFINITY);
         // The integrator's MIS needs the reported density to be the one env_pdf gives, exactly.
         assert_eq!(s.pdf, lights.env_pdf(s.wi));
@@ -185,7 +185,7 @@ fn constant_env_integrals_match_closed_form() {
     let n = 100_000;
     let (mut sphere, mut cosw) = (Vec::with_capacity(n), Vec::with_capacity(n));
     for _ in 0..n {
-        let s = lights.sample(&Mesh::default(), Vec3::ZERO, rng.next_f32(), rng.next_2d()).unwrap();
+        let s = lights.sample(Vec3::ZERO, rng.next_f32(), rng.next_2d()).unwrap();
         sphere.push((s.radiance.y / s.pdf) as f64);
         cosw.push((s.radiance.y * s.wi.y.max(0.0) / s.pdf) as f64);
     }
@@ -217,7 +217,7 @@ fn env_map_integral_matches_quadrature() {
     let n = 200_000;
     let mut est: [Vec<f64>; 3] = Default::default();
     for _ in 0..n {
-        let s = lights.sample(&Mesh::default(), Vec3::ZERO, rng.next_f32(), rng.next_2d()).unwrap();
+        let s = lights.sample(Vec3::ZERO, rng.next_f32(), rng.next_2d()).unwrap();
         let f = s.radiance / s.pdf;
         for c in 0..3 {
             est[c].push(f[c] as f64);
@@ -258,7 +258,7 @@ fn square_light_plus_env_irradiance_matches_lambert_formula() {
     let want = le.y as f64 * polygon_irradiance(p, n, &verts) + PI as f64 * c.y as f64;
     let mut rng = Pcg32::new(3, 4);
     let samples: Vec<f64> = (0..200_000)
-        .map(|_| match lights.sample(&mesh, p, rng.next_f32(), rng.next_2d()) {
+        .map(|_| match lights.sample(p, rng.next_f32(), rng.next_2d()) {
             Some(s) => (s.radiance.y * s.wi.dot(n).max(0.0) / s.pdf) as f64,
             None => 0.0,
         })
@@ -281,13 +281,13 @@ fn pdf_triangle_and_env_pdf_equal_sample_pdf() {
     let (mut tri, mut env) = (0, 0);
     for k in 0..20_000 {
         let p = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() * 0.5, rng.next_f32() - 0.5) * 2.0;
-        let Some(s) = lights.sample(&mesh, p, rng.next_f32(), rng.next_2d()) else { continue };
+        let Some(s) = lights.sample(p, rng.next_f32(), rng.next_2d()) else { continue };
         assert!(s.pdf > 0.0 && s.pdf.is_finite() && s.radiance.is_finite(), "sample {k}: {s:?}");
         match s.prim {
             Some(prim) => {
                 tri += 1;
                 let ng = mesh.geometric_normal(prim as usize);
-                let q = lights.pdf_triangle(&mesh, prim, p, p + s.wi * s.dist, ng);
+                let q = lights.pdf_triangle(prim, p, p + s.wi * s.dist, ng);
                 // p + wi·dist rebuilds the light point to ~1e-6 relative; 1e-4 still catches any
                 // missing factor (selection, area, cosine, distance²).
                 assert!((q - s.pdf).abs() <= 1e-4 * s.pdf, "sample {k}: pdf_triangle {q} vs {}", s.pdf);
@@ -306,15 +306,15 @@ fn pdf_triangle_and_env_pdf_equal_sample_pdf() {
     let mut mats2 = mats.to_vec();
     mats2.push(material(Vec3::ZERO, false));
     let l2 = Lights::build(&m2, &mats2, Environment::Constant(Vec3::ZERO));
-    assert_eq!(l2.pdf_triangle(&m2, 4, Vec3::ZERO, Vec3::new(5.5, 0.0, 5.5), Vec3::NEG_Y), 0.0);
+    assert_eq!(l2.pdf_triangle(4, Vec3::ZERO, Vec3::new(5.5, 0.0, 5.5), Vec3::NEG_Y), 0.0);
 }
 
 /// Fraction of `n` samples from `p` whose light satisfies `pred`.
-fn frequency(lights: &Lights, mesh: &Mesh, p: Vec3, n: usize, pred: impl Fn(&LightSample) -> bool) -> f64 {
+fn frequency(lights: &Lights, p: Vec3, n: usize, pred: impl Fn(&LightSample) -> bool) -> f64 {
     let mut rng = Pcg32::new(21, 2);
     let mut hits = 0usize;
     for _ in 0..n {
-        let s = lights.sample(mesh, p, rng.next_f32(), rng.next_2d()).expect("a sample facing the lights");
+        let s = lights.sample(p, rng.next_f32(), rng.next_2d()).expect("a sample facing the lights");
         hits += pred(&s) as usize;
     }
     hits as f64 / n as f64
@@ -334,7 +334,7 @@ fn selection_is_proportional_to_power() {
     let mats = [material(Vec3::ONE, false), material(Vec3::splat(3.0), false)];
     let lights = Lights::build(&mesh, &mats, Environment::Constant(Vec3::ZERO));
     let n = 40_000;
-    let f = frequency(&lights, &mesh, Vec3::ZERO, n, |s| s.prim.unwrap() >= 2);
+    let f = frequency(&lights, Vec3::ZERO, n, |s| s.prim.unwrap() >= 2);
     assert!((f - 0.75).abs() < binomial_4sigma(0.75, n), "bright light picked {f}");
 
     // Environment against a square of equal estimated power: the square (area 1, emission 2π)
@@ -342,7 +342,7 @@ fn selection_is_proportional_to_power() {
     let mut m1 = Mesh::default();
     add_square(&mut m1, 0.0, 0.0, 0.0, 1.0, 0);
     let l1 = Lights::build(&m1, &[material(Vec3::splat(2.0 * PI), false)], Environment::Constant(Vec3::ONE));
-    let f = frequency(&l1, &m1, Vec3::new(0.5, -1.0, 0.5), n, |s| s.prim.is_none());
+    let f = frequency(&l1, Vec3::new(0.5, -1.0, 0.5), n, |s| s.prim.is_none());
     assert!((f - 0.5).abs() < binomial_4sigma(0.5, n), "env picked {f}");
 }
 
@@ -355,10 +355,10 @@ fn dim_and_bright_kinds_keep_a_floor_share() {
     let q = MIN_KIND_SHARE as f64;
     // A nearly black sky next to a bright lamp, then a blinding sky next to a dim lamp.
     let dim_env = Lights::build(&mesh, &[material(Vec3::splat(100.0), false)], Environment::Constant(Vec3::splat(1e-9)));
-    let f = frequency(&dim_env, &mesh, p, n, |s| s.prim.is_none());
+    let f = frequency(&dim_env, p, n, |s| s.prim.is_none());
     assert!((f - q).abs() < binomial_4sigma(q, n), "dim env picked {f}");
     let bright_env = Lights::build(&mesh, &[material(Vec3::splat(1e-6), false)], Environment::Constant(Vec3::splat(1e5)));
-    let f = frequency(&bright_env, &mesh, p, n, |s| s.prim.is_some());
+    let f = frequency(&bright_env, p, n, |s| s.prim.is_some());
     assert!((f - q).abs() < binomial_4sigma(q, n), "dim lamp picked {f}");
 }
 
@@ -370,15 +370,15 @@ fn zero_area_lights_are_never_sampled() {
     let mats = [material(Vec3::ONE, true)];
     let lights = Lights::build(&mesh, &mats, Environment::Constant(Vec3::ZERO));
     assert!(lights.is_empty());
-    assert!(lights.sample(&mesh, Vec3::Y, 0.3, Vec2::splat(0.5)).is_none());
-    assert_eq!(lights.pdf_triangle(&mesh, 0, Vec3::Y, Vec3::X, Vec3::Y), 0.0);
+    assert!(lights.sample(Vec3::Y, 0.3, Vec2::splat(0.5)).is_none());
+    assert_eq!(lights.pdf_triangle(0, Vec3::Y, Vec3::X, Vec3::Y), 0.0);
 
     add_square(&mut mesh, 0.0, 0.0, 1.0, 1.0, 0);
     let lights = Lights::build(&mesh, &mats, Environment::Constant(Vec3::ZERO));
     assert!(!lights.is_empty());
     let mut rng = Pcg32::new(4, 4);
     for _ in 0..10_000 {
-        let s = lights.sample(&mesh, Vec3::new(0.5, 0.0, 0.5), rng.next_f32(), rng.next_2d()).unwrap();
+        let s = lights.sample(Vec3::new(0.5, 0.0, 0.5), rng.next_f32(), rng.next_2d()).unwrap();
         assert_ne!(s.prim, Some(0));
     }
 }
@@ -392,7 +392,7 @@ fn huge_emission_stays_finite() {
     let mut seen = 0;
     for _ in 0..10_000 {
         let p = Vec3::new(rng.next_f32(), -rng.next_f32(), rng.next_f32()) * 1e3;
-        if let Some(s) = lights.sample(&mesh, p, rng.next_f32(), rng.next_2d()) {
+        if let Some(s) = lights.sample(p, rng.next_f32(), rng.next_2d()) {
             let ratio = s.radiance / s.pdf;
             assert!(s.pdf > 0.0 && s.pdf.is_finite() && ratio.is_finite() && s.wi.is_finite(), "{s:?}");
             seen += s.prim.is_some() as usize;
@@ -411,21 +411,21 @@ fn grazing_and_coincident_points_give_none_or_finite() {
         // Points in the light's plane: inside the square, on an edge, at a corner, outside.
         for p in [Vec3::new(0.5, 1.0, 0.5), Vec3::new(1.0, 1.0, 0.3), Vec3::new(0.0, 1.0, 0.0), Vec3::new(3.0, 1.0, 0.5)] {
             for _ in 0..2000 {
-                if let Some(s) = lights.sample(&mesh, p, rng.next_f32(), rng.next_2d()) {
+                if let Some(s) = lights.sample(p, rng.next_f32(), rng.next_2d()) {
                     assert!(s.pdf > 0.0 && s.pdf.is_finite() && (s.radiance / s.pdf).is_finite(), "{s:?}");
                 }
             }
-            let q = lights.pdf_triangle(&mesh, 0, p, Vec3::new(0.7, 1.0, 0.2), Vec3::NEG_Y);
+            let q = lights.pdf_triangle(0, p, Vec3::new(0.7, 1.0, 0.2), Vec3::NEG_Y);
             assert!(q.is_finite() && q >= 0.0);
         }
         // The shading point on the light point itself.
-        let q = lights.pdf_triangle(&mesh, 0, Vec3::new(0.7, 1.0, 0.2), Vec3::new(0.7, 1.0, 0.2), Vec3::NEG_Y);
+        let q = lights.pdf_triangle(0, Vec3::new(0.7, 1.0, 0.2), Vec3::new(0.7, 1.0, 0.2), Vec3::NEG_Y);
         assert_eq!(q, 0.0);
         // Above the light, i.e. behind its emitting side (it faces −Y).
         let above = Vec3::new(0.5, 2.0, 0.5);
-        let s = lights.sample(&mesh, above, 0.5, Vec2::new(0.3, 0.6));
+        let s = lights.sample(above, 0.5, Vec2::new(0.3, 0.6));
         assert_eq!(s.is_some(), two_sided);
-        let q = lights.pdf_triangle(&mesh, 0, above, Vec3::new(0.7, 1.0, 0.2), Vec3::NEG_Y);
+        let q = lights.pdf_triangle(0, above, Vec3::new(0.7, 1.0, 0.2), Vec3::NEG_Y);
         assert_eq!(q > 0.0, two_sided);
     }
 }
@@ -434,7 +434,7 @@ fn grazing_and_coincident_points_give_none_or_finite() {
 fn black_and_broken_environments_are_not_selectable() {
     let black = Lights::build(&Mesh::default(), &[], Environment::Constant(Vec3::ZERO));
     assert!(black.is_empty());
-    assert!(black.sample(&Mesh::default(), Vec3::ZERO, 0.5, Vec2::splat(0.5)).is_none());
+    assert!(black.sample(Vec3::ZERO, 0.5, Vec2::splat(0.5)).is_none());
     assert_eq!(black.env_pdf(Vec3::Y), 0.0);
     assert_eq!(black.env_radiance(Vec3::Y), Vec3::ZERO);
 
@@ -442,7 +442,7 @@ fn black_and_broken_environments_are_not_selectable() {
     let mut mesh = Mesh::default();
     add_square(&mut mesh, 0.0, 0.0, 1.0, 1.0, 0);
     let l = Lights::build(&mesh, &[material(Vec3::ONE, false)], Environment::Constant(Vec3::ZERO));
-    assert_eq!(frequency(&l, &mesh, Vec3::new(0.5, 0.0, 0.5), 5000, |s| s.prim.is_none()), 0.0);
+    assert_eq!(frequency(&l, Vec3::new(0.5, 0.0, 0.5), 5000, |s| s.prim.is_none()), 0.0);
     assert_eq!(l.env_pdf(Vec3::NEG_Y), 0.0);
 
     // NaN, infinite and negative texels count as black; nothing non-finite comes out.
@@ -456,7 +456,7 @@ fn black_and_broken_environments_are_not_selectable() {
     for _ in 0..20_000 {
         let d = crate::sampling::square_to_uniform_sphere(rng.next_2d());
         assert!(l.env_radiance(d).is_finite() && l.env_pdf(d).is_finite());
-        if let Some(s) = l.sample(&Mesh::default(), Vec3::ZERO, rng.next_f32(), rng.next_2d()) {
+        if let Some(s) = l.sample(Vec3::ZERO, rng.next_f32(), rng.next_2d()) {
             assert!(s.pdf > 0.0 && s.pdf.is_finite() && s.radiance.is_finite());
         }
     }
@@ -482,7 +482,7 @@ fn non_finite_random_numbers_never_leak() {
         let lights = Lights::build(&mesh, &mats, env);
         for us in [f32::NAN, -1.0, 1.0, 2.0, f32::INFINITY] {
             for u in [Vec2::splat(f32::NAN), Vec2::splat(-0.5), Vec2::ONE, Vec2::new(f32::INFINITY, 0.5)] {
-                if let Some(s) = lights.sample(&mesh, Vec3::new(0.5, 0.0, 0.5), us, u) {
+                if let Some(s) = lights.sample(Vec3::new(0.5, 0.0, 0.5), us, u) {
                     assert!(s.wi.is_finite() && s.radiance.is_finite() && s.pdf.is_finite() && s.pdf > 0.0, "{us} {u}: {s:?}");
                 }
             }
