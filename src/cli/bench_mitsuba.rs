@@ -205,9 +205,10 @@ fn setup_mitsuba(scene_path: &Path, scene: &Scene, s: &Settings) -> Option<Mitsu
                 let fallback = session.ready.fallback_reason.clone();
                 return Some(MitsubaSide { session, fallback, libllvm: libllvm.clone() });
             }
-            Err(e) => format!("llvm_ad_rgb failed ({e:#})"),
+            // Dr.Jit 1.5 needs a recent LLVM for the kernels it emits (LLVM 15 aborts here).
+            Err(e) => format!("llvm_ad_rgb failed with {} ({e:#}); a newer libLLVM fixes it, e.g. Debian's `apt-get install libllvm19`", lib.display()),
         },
-        None => "no libLLVM found (set DRJIT_LIBLLVM_PATH)".into(),
+        None => "no libLLVM found (install one, e.g. Debian's `apt-get install libllvm19`, or set DRJIT_LIBLLVM_PATH)".into(),
     };
     match Session::start(&venv.python, &script, &xml, s, "scalar_rgb", None) {
         Ok(session) => Some(MitsubaSide { session, fallback: Some(fallback), libllvm }),
