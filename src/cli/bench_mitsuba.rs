@@ -206,7 +206,10 @@ fn setup_mitsuba(scene_path: &Path, scene: &Scene, s: &Settings) -> Option<Mitsu
                 return Some(MitsubaSide { session, fallback, libllvm: libllvm.clone() });
             }
             // Dr.Jit 1.5 needs a recent LLVM for the kernels it emits (LLVM 15 aborts here).
-            Err(e) => format!("llvm_ad_rgb failed with {} ({e:#}); a newer libLLVM fixes it, e.g. Debian's `apt-get install libllvm19`", lib.display()),
+            Err(e) => format!(
+                "llvm_ad_rgb failed with {} ({e:#}); a newer libLLVM fixes it, e.g. Debian's `apt-get install libllvm19`",
+                lib.display()
+            ),
         },
         None => "no libLLVM found (install one, e.g. Debian's `apt-get install libllvm19`, or set DRJIT_LIBLLVM_PATH)".into(),
     };

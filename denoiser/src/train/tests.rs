@@ -441,10 +441,10 @@ fn descriptors_read_from_their_file_equal_the_planes_in_memory() {
     }
 }
 
-/// A packed checkpoint (bf16 optimizer state, f16 best weights) is a third smaller, unpacks
-/// to a folder `--resume` continues from, and the finished run is the uninterrupted one up to
-/// the roundings: weights within 1 % of their spread, against a resume with no optimizer
-/// state, which lands further away.
+/// A packed checkpoint (f16 weights, Adam's second moment in bf16 and its first left out) is
+/// 6 bytes a parameter against the folder's 16, unpacks to a folder `--resume` continues from,
+/// and the finished run is the uninterrupted one up to the roundings: weights within 1 % of
+/// their spread, against a resume with no optimizer state, which lands further away.
 #[test]
 fn packed_checkpoint_resumes_close_to_the_uninterrupted_run() {
     let data = dataset();
@@ -457,10 +457,21 @@ fn packed_checkpoint_resumes_close_to_the_uninterrupted_run() {
     let size = |d: &Path| std::fs::read_dir(d).unwrap().flatten().map(|e| e.metadata().unwrap().len()).sum::<u64>();
     let packed = tmpdir("pack-packed");
     let bytes = pack::pack(&dir, &packed).unwrap();
-    assert!(bytes < size(&dir) * 3 / 4, "{bytes} of {}", size(&dir));
+    // 6/16 of the tensor bytes, plus headers and state.json, which weigh more in this tiny model.
+    assert!(bytes < size(&dir) / 2, "{bytes} of {}", size(&dir));
     let restored = tmpdir("pack-restored");
     pack::unpack(&packed, &restored).unwrap();
-    assert_eq!(std::fs::read(dir.join("model.safetensors")).unwrap(), std::fs::read(restored.join("model.safetensors")).unwrap());
+    // The unpacked weights are the paused run's within f16 rounding.
+    let (paused, _) = checkpoint::read_weights(&dir.join("model.safetensors")).unwrap();
+    let (unpacked, _) = checkpoint::read_weights(&restored.join("model.safetensors")).unwrap();
+    assert_eq!(paused.len(), unpacked.len());
+    for (name, (shape, v)) in &paused {
+        let (s, u) = &unpacked[name];
+        assert_eq!(shape, s, "{name}");
+        for (a, b) in v.iter().zip(u) {
+            assert!((a - b).abs() <= a.abs() * 2f32.powi(-11) + 6e-8, "{name}: {a} -> {b}");
+        }
+    }
     let resumed = flat_values(&train(&data, &o, Some(&restored), true).model);
     let rms = |a: &[f32], b: &[f32]| (a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum::<f64>() / a.len() as f64).sqrt();
     let spread = rms(&straight, &vec![0.0; straight.len()]);
