@@ -7,13 +7,19 @@
 #
 #   tools/campaign.sh DATA RUNS MINUTES   # e.g. tools/campaign.sh /work/data/campaign /work/runs/campaign 150
 #
-# Phase 1: g and p side by side (one thread each). Phase 2, once both are done: both and
-# guided (from the finished g and p) side by side. Phase 3: the ablations. At the end of the session every unfinished
-# run is packed (`pixguide checkpoint pack`) into denoiser/weights/campaign/<model>.ckpt and
-# every finished one's weights and log are copied there; commit that folder.
+# Two lanes, one thread each, so both cores work all session:
+#   lane 1: g, then both (which needs nothing from g), then Fix-N-Train and Full-N-Full;
+#   lane 2: p, then guided (from the finished g and p: it waits for g if p ends first), then
+#           radiance-only. The ablations wait for guided, whose step rate plans them.
+# An ablation starts only if its whole plan fits in the session's remaining time at the step
+# rate its parent run measured, so it never needs a packed checkpoint (issue 12's 50 MB budget,
+# docs/training.md). At the end of the session every unfinished run is packed (`pixguide
+# checkpoint pack`) into denoiser/weights/campaign/<model>.ckpt and every finished one's
+# weights and log are copied there; commit that folder.
 #
 # Environment (defaults in brackets):
 #   PIXGUIDE  the binary [target/release/pixguide]; a `--features tch` build for BACKEND=tch
+#             (its LibTorch is found in target/torch-venv when LD_LIBRARY_PATH does not name one)
 #   BACKEND   flex or tch [tch]      PRESET [edge-noise]      KEEP [denoiser/weights/campaign]
 #   G_STEPS, P_STEPS, BOTH_STEPS, GUIDED_STEPS   planned steps [12000, 1500, 1500, 1000]
 #   ABLATION_STEPS (fix-n-train, radiance-only), SCRATCH_STEPS (full-n-full)   [500, 1000]
@@ -26,20 +32,27 @@ backend=${BACKEND:-tch}
 preset=${PRESET:-edge-noise}
 keep=${KEEP:-denoiser/weights/campaign}
 deadline=$(($(date +%s) + minutes * 60))
+torch_lib=target/torch-venv/lib/python3.11/site-packages/torch/lib
+if [ "$backend" != flex ] && [ -d "$torch_lib" ] && [[ "${LD_LIBRARY_PATH:-}" != *torch* ]]; then
+    export LD_LIBRARY_PATH="$PWD/$torch_lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+fi
 # The shipped recipe's losses (tools/train_set.sh, docs/denoiser.md): g, both and the joint
 # stage weigh each patch's L1 plus a relative L2 term by the input's error; p the relative L1.
 inside=(--loss-scale relative-to-input --rel-l2-weight 1 --rel-l2-inside)
 relative=(--loss-scale relative-to-input)
 common=(--backend "$backend" --data "$data" --preset "$preset" --patch 96 --batch 2 --resume --quiet --finetune-steps 0)
 mkdir -p "$runs" "$keep"
+models=(g p both guided fix-n-train radiance-only full-n-full)
 
 left() { echo $(((deadline - $(date +%s)) / 60)); }
 done_() { [ -s "$runs/$1.safetensors" ]; }
 # A checkpoint committed by an earlier session on another machine continues here.
-for m in g p both guided fix-n-train radiance-only full-n-full; do
+for m in "${models[@]}"; do
     if ! done_ "$m" && [ ! -e "$runs/$m.safetensors.ckpt/state.json" ] && [ -e "$keep/$m.ckpt/state.json" ]; then
         "$bin" checkpoint unpack "$keep/$m.ckpt" -o "$runs/$m.safetensors.ckpt"
     fi
+    if done_ "$m" || [ -e "$runs/$m.safetensors" ] || [ ! -e "$keep/$m.safetensors" ]; then continue; fi
+    cp "$keep/$m.safetensors" "$keep/$m.safetensors.log.jsonl" "$runs/"
 done
 train() { # name args...
     local name=$1
@@ -51,27 +64,55 @@ train() { # name args...
     OMP_NUM_THREADS=1 nice "$bin" --threads 1 train "${common[@]}" -o "$runs/$name.safetensors" \
         --session-minutes "$m" "$@" >>"$runs/$name.out" 2>&1
 }
-train g --method g "${inside[@]}" --lr-branches 1e-3 --branch-steps "${G_STEPS:-12000}" --val-every 500 &
-train p --method p "${relative[@]}" --lr-branches 5e-4 --branch-steps "${P_STEPS:-1500}" --val-every 100 &
-wait
+# Mean seconds a step of a finished run (from its log), times a factor in percent.
+step_seconds() { # log factor_percent
+    python3 -c "import json,sys; s=[json.loads(l).get('seconds') for l in open(sys.argv[1]) if '\"step\"' in l]; s=[x for x in s if x]; print(int(sum(s)/max(len(s),1)*int(sys.argv[2])/100)+1)" "$1" "$2"
+}
+# Starts an ablation only if its plan fits: steps × (parent's s/step × factor) < time left.
+ablation() { # name steps parent factor_percent args...
+    local name=$1 steps=$2 parent=$3 factor=$4
+    shift 4
+    done_ "$name" && return 0
+    if [ ! -e "$runs/$name.safetensors.ckpt/state.json" ]; then
+        local need=$((steps * $(step_seconds "$runs/$parent.safetensors.log.jsonl" "$factor") / 60 + 3))
+        if [ "$need" -gt "$(left)" ]; then
+            echo "$name: needs ~$need min, $(left) left: next session" >>"$runs/$name.out"
+            return 0
+        fi
+    fi
+    train "$name" "$@"
+}
 from_gp=(--from-g "$runs/g.safetensors" --from-p "$runs/p.safetensors")
-if done_ g && done_ p; then
-    train both --method both "${inside[@]}" --lr-branches 3e-4 --branch-steps "${BOTH_STEPS:-1500}" --val-every 100 &
+# Waits (while the session lasts) for the other lane to finish model $1; true if it did.
+await() {
+    while ! done_ "$1" && [ "$(left)" -ge 2 ]; do sleep 60; done
+    done_ "$1"
+}
+lane1() {
+    train g --method g "${inside[@]}" --lr-branches 1e-3 --branch-steps "${G_STEPS:-12000}" --val-every 500
+    done_ g || return 0
+    train both --method both "${inside[@]}" --lr-branches 3e-4 --branch-steps "${BOTH_STEPS:-1500}" --val-every 100
+    done_ both && await guided || return 0
+    # Fix-N-Train trains only E, the cheapest of the guided family: guided's rate bounds it.
+    ablation fix-n-train "${ABLATION_STEPS:-500}" guided 100 --ablation fix-n-train "${inside[@]}" "${from_gp[@]}" \
+        --joint-steps "${ABLATION_STEPS:-500}" --val-every 100
+    # Full-N-Full: everything from scratch at the pretraining rate, a step as costly as guided's.
+    ablation full-n-full "${SCRATCH_STEPS:-1000}" guided 110 --ablation full-n-full "${inside[@]}" \
+        --scratch-steps "${SCRATCH_STEPS:-1000}" --val-every 100
+}
+lane2() {
+    train p --method p "${relative[@]}" --lr-branches 5e-4 --branch-steps "${P_STEPS:-1500}" --val-every 100
+    done_ p && await g || return 0
     train guided --method guided "${inside[@]}" "${from_gp[@]}" --joint-steps "${GUIDED_STEPS:-1000}" \
-        --lr-joint-rest 1e-5 --val-every 100 &
-    wait
-fi
-# Phase 3: the ablations of the paper's Table 2 on the same data, shorter (issue 12 allows it),
-# two at a time. Fix-N-Train and radiance-only start from the campaign's g and p; Full-N-Full
-# trains everything from scratch at the pretraining rate.
-if done_ g && done_ p && done_ both && done_ guided; then
-    train fix-n-train --ablation fix-n-train "${inside[@]}" "${from_gp[@]}" --joint-steps "${ABLATION_STEPS:-500}" --val-every 100 &
-    train radiance-only --ablation radiance-only "${inside[@]}" "${from_gp[@]}" --joint-steps "${ABLATION_STEPS:-500}" \
-        --lr-joint-rest 1e-5 --val-every 100 &
-    wait
-    train full-n-full --ablation full-n-full "${inside[@]}" --scratch-steps "${SCRATCH_STEPS:-1000}" --val-every 100
-fi
-for m in g p both guided fix-n-train radiance-only full-n-full; do
+        --lr-joint-rest 1e-5 --val-every 100
+    done_ guided || return 0
+    ablation radiance-only "${ABLATION_STEPS:-500}" guided 100 --ablation radiance-only "${inside[@]}" "${from_gp[@]}" \
+        --joint-steps "${ABLATION_STEPS:-500}" --lr-joint-rest 1e-5 --val-every 100
+}
+lane1 &
+lane2 &
+wait
+for m in "${models[@]}"; do
     if done_ "$m"; then
         cp "$runs/$m.safetensors" "$runs/$m.safetensors.log.jsonl" "$keep/"
         rm -rf "$keep/$m.ckpt"
