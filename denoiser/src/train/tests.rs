@@ -441,8 +441,8 @@ fn descriptors_read_from_their_file_equal_the_planes_in_memory() {
     }
 }
 
-/// A packed checkpoint (f16 weights, Adam's second moment in bf16 and its first left out) is
-/// 6 bytes a parameter against the folder's 16, unpacks to a folder `--resume` continues from,
+/// A packed checkpoint (f16 weights, Adam's second moment in 8 bits and its first left out) is
+/// 5 bytes a parameter against the folder's 16, unpacks to a folder `--resume` continues from,
 /// and the finished run is the uninterrupted one up to the roundings: weights within 1 % of
 /// their spread, against a resume with no optimizer state, which lands further away.
 #[test]
@@ -457,7 +457,7 @@ fn packed_checkpoint_resumes_close_to_the_uninterrupted_run() {
     let size = |d: &Path| std::fs::read_dir(d).unwrap().flatten().map(|e| e.metadata().unwrap().len()).sum::<u64>();
     let packed = tmpdir("pack-packed");
     let bytes = pack::pack(&dir, &packed).unwrap();
-    // 6/16 of the tensor bytes, plus headers and state.json, which weigh more in this tiny model.
+    // 5/16 of the tensor bytes, plus headers and state.json, which weigh more in this tiny model.
     assert!(bytes < size(&dir) / 2, "{bytes} of {}", size(&dir));
     let restored = tmpdir("pack-restored");
     pack::unpack(&packed, &restored).unwrap();
