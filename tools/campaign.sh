@@ -36,14 +36,14 @@ torch_lib=target/torch-venv/lib/python3.11/site-packages/torch/lib
 if [ "$backend" != flex ] && [ -d "$torch_lib" ] && [[ "${LD_LIBRARY_PATH:-}" != *torch* ]]; then
     export LD_LIBRARY_PATH="$PWD/$torch_lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 fi
-# jemalloc, never giving memory back: glibc maps every tensor over 32 MiB afresh, and half of a p
-# step went to the kernel's page faults (a 64-spp p step 16.6 -> 6.6 s, g 0.43 -> 0.36 s;
-# docs/training.md, "Memory allocator").
+# Opt-in (JEMALLOC=1): jemalloc that never gives memory back. glibc maps every tensor over 32 MiB
+# afresh, and half of a p step went to the kernel's page faults (a 64-spp p step 16.6 -> 6.6 s);
+# but the two campaign runs then grew to 24 GB within six minutes and had to be stopped before
+# the OOM killer came (docs/training.md, "Memory allocator"). Not the default until a
+# configuration with bounded memory is measured.
 jemalloc=/usr/lib/x86_64-linux-gnu/libjemalloc.so.2
-if [ -z "${LD_PRELOAD:-}" ] && [ -e "$jemalloc" ]; then
-    export LD_PRELOAD=$jemalloc MALLOC_CONF=dirty_decay_ms:-1,muzzy_decay_ms:-1
-elif [ -z "${LD_PRELOAD:-}" ]; then
-    echo "note: no $jemalloc (Debian: apt-get install libjemalloc2); p trains 2.5x slower without it" >&2
+if [ "${JEMALLOC:-0}" = 1 ] && [ -e "$jemalloc" ]; then
+    export LD_PRELOAD=$jemalloc MALLOC_CONF=${MALLOC_CONF:-dirty_decay_ms:-1,muzzy_decay_ms:-1}
 fi
 # The shipped recipe's losses (tools/train_set.sh, docs/denoiser.md): g, both and the joint
 # stage weigh each patch's L1 plus a relative L2 term by the input's error; p the relative L1.
