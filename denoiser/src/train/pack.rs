@@ -174,12 +174,13 @@ fn convert_weights(from: &Path, to: &Path, dtype: safetensors::Dtype) -> Result<
             safetensors::Dtype::F16 => t.data().chunks_exact(2).map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32()).collect(),
             d => return Err(err(from, format!("tensor `{name}` is {d:?}, expected f32 or f16"))),
         };
-        let fits_f16 = values.iter().all(|&v| !v.is_finite() || half::f16::from_f32(v).is_finite());
-        let (dt, raw) = match dtype {
-            safetensors::Dtype::F16 if fits_f16 => {
-                (safetensors::Dtype::F16, values.iter().flat_map(|&v| half::f16::from_f32(v).to_le_bytes()).collect())
-            }
-            _ => (safetensors::Dtype::F32, values.iter().flat_map(|v| v.to_le_bytes()).collect()),
+        // Converted once; kept only if no finite value became infinite.
+        let halves = (dtype == safetensors::Dtype::F16)
+            .then(|| values.iter().map(|&v| half::f16::from_f32(v)).collect::<Vec<_>>())
+            .filter(|h| h.iter().zip(&values).all(|(h, v)| h.is_finite() || !v.is_finite()));
+        let (dt, raw) = match halves {
+            Some(h) => (safetensors::Dtype::F16, h.iter().flat_map(|x| x.to_le_bytes()).collect()),
+            None => (safetensors::Dtype::F32, values.iter().flat_map(|v| v.to_le_bytes()).collect()),
         };
         out.push((name, dt, t.shape().to_vec(), raw));
     }
