@@ -3,6 +3,7 @@
 
 mod alloc_stats;
 mod cli;
+mod malloc_release;
 
 #[global_allocator]
 static ALLOC: alloc_stats::Counting = alloc_stats::Counting;

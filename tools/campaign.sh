@@ -36,15 +36,20 @@ torch_lib=target/torch-venv/lib/python3.11/site-packages/torch/lib
 if [ "$backend" != flex ] && [ -d "$torch_lib" ] && [[ "${LD_LIBRARY_PATH:-}" != *torch* ]]; then
     export LD_LIBRARY_PATH="$PWD/$torch_lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 fi
-# Opt-in (JEMALLOC=1): jemalloc that never gives memory back. glibc maps every tensor over 32 MiB
-# afresh, and half of a p step went to the kernel's page faults (a 64-spp p step 16.6 -> 6.6 s);
-# but the two campaign runs then grew to 24 GB within six minutes and had to be stopped before
-# the OOM killer came (docs/training.md, "Memory allocator"). Not the default until a
-# configuration with bounded memory is measured.
-jemalloc=/usr/lib/x86_64-linux-gnu/libjemalloc.so.2
-if [ "${JEMALLOC:-0}" = 1 ] && [ -e "$jemalloc" ]; then
-    export LD_PRELOAD=$jemalloc MALLOC_CONF=${MALLOC_CONF:-dirty_decay_ms:-1,muzzy_decay_ms:-1}
-fi
+# The allocator. glibc maps every allocation over 32 MiB afresh and faults it in page by page:
+# half of a p step went to the kernel (docs/training.md, "Memory allocator"). By default glibc
+# backs those mappings with transparent huge pages (GLIBC_TUNABLES glibc.malloc.hugetlb=1), which
+# cuts the faults 512-fold. JEMALLOC=lane2 preloads jemalloc with its decay off for lane 2 (p,
+# guided, radiance-only: the descriptor steps, which gain most), JEMALLOC=all for both lanes:
+# faster still, but it keeps each run's peak working set, and both lanes so together reached
+# 24 GB; `pixguide train` purges it after loading and after each validation.
+export GLIBC_TUNABLES=${GLIBC_TUNABLES:-glibc.malloc.hugetlb=1}
+use_jemalloc() { # lane
+    local lib=/usr/lib/x86_64-linux-gnu/libjemalloc.so.2
+    if { [ "${JEMALLOC:-}" = all ] || [ "${JEMALLOC:-}" = "$1" ]; } && [ -e "$lib" ]; then
+        export LD_PRELOAD=$lib MALLOC_CONF=${MALLOC_CONF:-narenas:1,dirty_decay_ms:-1,muzzy_decay_ms:-1}
+    fi
+}
 # The shipped recipe's losses (tools/train_set.sh, docs/denoiser.md): g, both and the joint
 # stage weigh each patch's L1 plus a relative L2 term by the input's error; p the relative L1.
 inside=(--loss-scale relative-to-input --rel-l2-weight 1 --rel-l2-inside)
@@ -98,6 +103,7 @@ await() {
     done_ "$1"
 }
 lane1() {
+    use_jemalloc lane1
     train g --method g "${inside[@]}" --lr-branches 1e-3 --branch-steps "${G_STEPS:-12000}" --val-every 500
     done_ g || return 0
     train both --method both "${inside[@]}" --lr-branches 3e-4 --branch-steps "${BOTH_STEPS:-1500}" --val-every 100
@@ -110,6 +116,7 @@ lane1() {
         --scratch-steps "${SCRATCH_STEPS:-1000}" --val-every 100
 }
 lane2() {
+    use_jemalloc lane2
     train p --method p "${relative[@]}" --lr-branches 5e-4 --branch-steps "${P_STEPS:-1500}" --val-every 100
     done_ p && await g || return 0
     train guided --method guided "${inside[@]}" "${from_gp[@]}" --joint-steps "${GUIDED_STEPS:-1000}" \

@@ -14,3 +14,4 @@ pub mod reference;
 pub mod render;
 pub mod sky;
 pub mod train;
+pub mod val_baselines;

@@ -4,8 +4,10 @@
 
 use super::eval_plot::{self, Canvas, AXIS_SIZE, CAPTION_SIZE, TICK_SIZE};
 use super::font;
+use super::val_baselines::{self, Baseline};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
+use denoiser::model::Preset;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use serde_json::Value;
@@ -31,6 +33,20 @@ pub struct PlotTrainingArgs {
     /// Title above both panels.
     #[arg(long, default_value = "Validation relMSE during training")]
     pub title: String,
+    /// Dataset the runs validated on: the noisy input and OIDN (installed on first use, as for
+    /// `pixguide eval`) are scored on its validation shots with the runs' own measure and drawn as
+    /// dashed lines.
+    #[arg(long)]
+    pub baselines: Option<PathBuf>,
+    /// With --baselines: the runs' network preset (its margin is cropped from every window).
+    #[arg(long, default_value = "edge-noise")]
+    pub preset: Preset,
+    /// With --baselines: the runs' patch side (`pixguide train --patch`).
+    #[arg(long, default_value_t = 96)]
+    pub patch: usize,
+    /// With --baselines: the noisy input only, without OIDN.
+    #[arg(long)]
+    pub no_oidn: bool,
 }
 
 /// One validation of a run.
@@ -182,8 +198,18 @@ pub fn run(a: PlotTrainingArgs) -> Result<()> {
         runs.push(parse_log(&path.display().to_string(), &text)?);
     }
     let runs: Vec<(String, Run)> = labels.into_iter().zip(runs).collect();
-    draw(&a.output, &a.title, &runs)?;
+    let baselines = match &a.baselines {
+        None => Vec::new(),
+        Some(data) => {
+            let oidn = if a.no_oidn { None } else { Some(super::oidn_setup::load()?.0) };
+            val_baselines::measure(data, a.patch, a.preset.config().margin(), oidn.as_ref())?
+        }
+    };
+    draw(&a.output, &a.title, &runs, &baselines)?;
     print!("{}", table(&runs));
+    if !baselines.is_empty() {
+        print!("{}", baseline_table(&baselines));
+    }
     eprintln!("wrote {}", a.output.display());
     Ok(())
 }
@@ -210,6 +236,19 @@ fn table(runs: &[(String, Run)]) -> String {
     }
     if runs.iter().any(|r| r.1.time_from_steps) {
         s += "\n\\* log without validation times: minutes are summed step durations and leave out validation.\n";
+    }
+    s
+}
+
+fn baseline_table(baselines: &[Baseline]) -> String {
+    let spps: Vec<usize> = baselines[0].by_spp.iter().map(|b| b.0).collect();
+    let mut s = format!(
+        "\n| baseline (same validation measure) | all | {} |\n|---|---:|{}\n",
+        spps.iter().map(|n| format!("{n} spp")).collect::<Vec<_>>().join(" | "),
+        "---:|".repeat(spps.len())
+    );
+    for b in baselines {
+        s += &format!("| {} | {} | {} |\n", b.label, sig4(b.overall), b.by_spp.iter().map(|v| sig4(v.1)).collect::<Vec<_>>().join(" | "));
     }
     s
 }
@@ -250,20 +289,27 @@ fn num(v: f64, decimals: usize) -> String {
 }
 
 /// y range of the curves: a 10 % margin on a log scale, at least a factor 1.5 wide.
-fn y_range(runs: &[(String, Run)]) -> (f64, f64) {
+fn y_range(runs: &[(String, Run)], baselines: &[Baseline]) -> (f64, f64) {
     let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
-    for v in runs.iter().flat_map(|r| &r.1.vals) {
-        lo = lo.min(v.rel_mse);
-        hi = hi.max(v.rel_mse);
+    for v in runs.iter().flat_map(|r| &r.1.vals).map(|v| v.rel_mse).chain(baselines.iter().map(|b| b.overall)) {
+        lo = lo.min(v);
+        hi = hi.max(v);
     }
     let widen = (1.5 / (hi / lo)).max(1.0).sqrt();
     (lo / 1.1 / widen, hi * 1.1 * widen)
 }
 
-fn panel(area: &DrawingArea<Canvas<'_>, Shift>, caption: &str, x_label: &str, runs: &[(String, Run)], x_of: fn(&Val) -> f64) -> Result<()> {
+fn panel(
+    area: &DrawingArea<Canvas<'_>, Shift>,
+    caption: &str,
+    x_label: &str,
+    runs: &[(String, Run)],
+    baselines: &[Baseline],
+    x_of: fn(&Val) -> f64,
+) -> Result<()> {
     let err = |e: DrawingAreaErrorKind<std::io::Error>| anyhow!("plot: {e}");
     let x_max = runs.iter().flat_map(|r| &r.1.vals).map(x_of).fold(0.0, f64::max).max(1e-6) * 1.05;
-    let (y0, y1) = y_range(runs);
+    let (y0, y1) = y_range(runs, baselines);
     let (y_keys, y_dec) = y_ticks(y0, y1);
     let x_dec = if x_max < 3.0 {
         2
@@ -300,6 +346,10 @@ fn panel(area: &DrawingArea<Canvas<'_>, Shift>, caption: &str, x_label: &str, ru
         chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, col.filled()))).map_err(err)?;
         chart.draw_series(std::iter::once(Circle::new(pts[r.best()], 8, col.stroke_width(2)))).map_err(err)?;
     }
+    for (i, b) in baselines.iter().enumerate() {
+        let col = eval_plot::colour(runs.len() + i);
+        chart.draw_series(DashedLineSeries::new([(0.0, b.overall), (x_max, b.overall)], 10, 6, col.stroke_width(2))).map_err(err)?;
+    }
     Ok(())
 }
 
@@ -308,12 +358,16 @@ const TITLE_SIZE: f32 = 22.0;
 const NOTE_H: u32 = 18;
 const NOTE_SIZE: f32 = 14.0;
 
-fn draw(path: &Path, title: &str, runs: &[(String, Run)]) -> Result<()> {
+fn draw(path: &Path, title: &str, runs: &[(String, Run)], baselines: &[Baseline]) -> Result<()> {
     let (w, plot_h) = (1100u32, 440u32);
-    let legend_labels: Vec<String> = runs.iter().map(|(l, r)| if r.time_from_steps { format!("{l} *") } else { l.clone() }).collect();
+    let mut legend_labels: Vec<String> = runs.iter().map(|(l, r)| if r.time_from_steps { format!("{l} *") } else { l.clone() }).collect();
+    legend_labels.extend(baselines.iter().map(|b| format!("{} (dashed)", b.label)));
     let entries: Vec<(usize, &str)> = legend_labels.iter().enumerate().map(|(i, l)| (i, l.as_str())).collect();
     let legend_h = eval_plot::legend_height(&entries, w);
     let mut notes = vec!["Rings: the best validation of each run.".to_string()];
+    if !baselines.is_empty() {
+        notes.push("Dashed: the noisy input and OIDN on the same validation windows, scored as the runs are.".into());
+    }
     if runs.iter().any(|r| r.1.time_from_steps) {
         notes.push("* Minutes exclude validation: the log has no validation times, so they are its summed step durations.".into());
     }
@@ -324,8 +378,8 @@ fn draw(path: &Path, title: &str, runs: &[(String, Run)]) -> Result<()> {
         let (_, below_title) = root.split_vertically(TITLE_H);
         let (plots, _) = below_title.split_vertically(plot_h);
         let halves = plots.split_evenly((1, 2));
-        panel(&halves[0], "against training steps", "total steps", runs, |v| v.step as f64)?;
-        panel(&halves[1], "against wall time", "wall-clock minutes", runs, |v| v.minutes)?;
+        panel(&halves[0], "against training steps", "total steps", runs, baselines, |v| v.step as f64)?;
+        panel(&halves[1], "against wall time", "wall-clock minutes", runs, baselines, |v| v.minutes)?;
     }
     let title_w = font::text_size(title, TITLE_SIZE).0;
     font::draw(&mut px, w, (w.saturating_sub(title_w) / 2, 8), w, TITLE_SIZE, [20, 20, 20], title);

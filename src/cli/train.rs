@@ -2,7 +2,7 @@
 //! `pixguide dataset` folder with the staged schedule of method.md §3/§6.2; resumable.
 
 use super::progress;
-use crate::alloc_stats;
+use crate::{alloc_stats, malloc_release};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use denoiser::method::Method;
@@ -334,6 +334,7 @@ fn load_dataset(a: &TrainArgs, descriptors: bool, sampling: Sampling) -> Result<
         lpb.set_position(i as u64);
     })?;
     lpb.finish_and_clear();
+    malloc_release::release();
     eprintln!(
         "{}: {} train + {} val shots {}×{} at {:?} spp loaded in {:.1} s ({:.0} MiB prepared, heap +{:.0} MiB)",
         a.data.display(),
@@ -486,6 +487,7 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
             }
             Event::Validation { stage, step, total_step, rel_mse, best, seconds } => {
                 last_val = Some(*rel_mse);
+                malloc_release::release();
                 LogLine::Val {
                     stage: *stage,
                     step: *step,
