@@ -50,11 +50,13 @@ pub struct PlotTrainingArgs {
 }
 
 /// One validation of a run.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 struct Val {
     step: usize,
     rel_mse: f64,
     minutes: f64,
+    /// (spp, relMSE at that sample count); empty in logs written before training logged it.
+    by_spp: Vec<(usize, f64)>,
 }
 
 /// What a log says about its run.
@@ -115,8 +117,8 @@ fn field_f64(v: &Value, key: &str, what: &str) -> Result<f64> {
 /// Reads a training log; `name` (the file) is named in every error, with the line number where
 /// there is one.
 fn parse_log(name: &str, text: &str) -> Result<Run> {
-    // (total step, relMSE, wall seconds if logged, summed step seconds so far)
-    let mut vals: Vec<(usize, f64, Option<f64>, f64)> = Vec::new();
+    // (total step, relMSE, wall seconds if logged, summed step seconds so far, by spp)
+    let mut vals: Vec<(usize, f64, Option<f64>, f64, Vec<(usize, f64)>)> = Vec::new();
     let mut step_seconds = 0.0;
     let mut stage_steps: BTreeMap<u64, u64> = BTreeMap::new();
     let mut lines = 0;
@@ -153,12 +155,20 @@ fn parse_log(name: &str, text: &str) -> Result<Run> {
                     None => None,
                     Some(_) => Some(field_f64(&v, "seconds", "val").with_context(at)?),
                 };
+                let by_spp = match v.get("by_spp") {
+                    None => Vec::new(),
+                    Some(b) => serde_json::from_value::<Vec<(usize, Option<f64>)>>(b.clone())
+                        .map_err(|e| anyhow!("{}: \"by_spp\" is not a list of [spp, relMSE] pairs ({e})", at()))?
+                        .into_iter()
+                        .map(|(n, r)| (n, r.unwrap_or(f64::NAN)))
+                        .collect(),
+                };
                 // A run resumed from an older checkpoint repeats steps: its new validations
                 // replace those of the abandoned continuation.
                 while vals.last().is_some_and(|l| l.0 >= total) {
                     vals.pop();
                 }
-                vals.push((total, rel_mse, seconds, step_seconds));
+                vals.push((total, rel_mse, seconds, step_seconds, by_spp));
             }
             _ => {}
         }
@@ -170,15 +180,15 @@ fn parse_log(name: &str, text: &str) -> Result<Run> {
         bail!("{name}: no validation events in {lines} lines (did the run stop before its first validation?)");
     }
     let time_from_steps = vals.iter().any(|v| v.2.is_none());
-    let seconds_at = |v: &(usize, f64, Option<f64>, f64)| if time_from_steps { v.3 } else { v.2.unwrap_or(v.3) };
-    let last = vals[vals.len() - 1];
+    let seconds_at = |v: &(usize, f64, Option<f64>, f64, Vec<(usize, f64)>)| if time_from_steps { v.3 } else { v.2.unwrap_or(v.3) };
+    let last = &vals[vals.len() - 1];
     // Steps trained after the last validation still count towards the run's length.
-    let minutes = (seconds_at(&last) + (step_seconds - last.3)) / 60.0;
+    let minutes = (seconds_at(last) + (step_seconds - last.3)) / 60.0;
     let steps = (stage_steps.values().sum::<u64>() as usize).max(last.0);
     let vals: Vec<Val> = vals
         .iter()
         .filter(|v| v.1.is_finite() && v.1 > 0.0)
-        .map(|v| Val { step: v.0, rel_mse: v.1, minutes: seconds_at(v) / 60.0 })
+        .map(|v| Val { step: v.0, rel_mse: v.1, minutes: seconds_at(v) / 60.0, by_spp: v.4.clone() })
         .collect();
     if vals.is_empty() {
         bail!("{name}: no validation with a finite, positive relMSE");
@@ -207,9 +217,7 @@ pub fn run(a: PlotTrainingArgs) -> Result<()> {
     };
     draw(&a.output, &a.title, &runs, &baselines)?;
     print!("{}", table(&runs));
-    if !baselines.is_empty() {
-        print!("{}", baseline_table(&baselines));
-    }
+    print!("{}", by_spp_table(&runs, &baselines));
     eprintln!("wrote {}", a.output.display());
     Ok(())
 }
@@ -240,15 +248,32 @@ fn table(runs: &[(String, Run)]) -> String {
     s
 }
 
-fn baseline_table(baselines: &[Baseline]) -> String {
-    let spps: Vec<usize> = baselines[0].by_spp.iter().map(|b| b.0).collect();
+/// Each run's best validation split by sample count (runs whose log has the split), and the
+/// baselines on the same measure: the issue's floors are per spp. Empty if there is neither.
+fn by_spp_table(runs: &[(String, Run)], baselines: &[Baseline]) -> String {
+    let mut rows: Vec<(String, f64, Vec<(usize, f64)>)> = Vec::new();
+    for (label, r) in runs {
+        let b = &r.vals[r.best()];
+        if !b.by_spp.is_empty() {
+            rows.push((format!("{label}, best (step {})", b.step), b.rel_mse, b.by_spp.clone()));
+        }
+    }
+    rows.extend(baselines.iter().map(|b| (b.label.to_string(), b.overall, b.by_spp.clone())));
+    let mut spps: Vec<usize> = rows.iter().flat_map(|r| r.2.iter().map(|v| v.0)).collect();
+    spps.sort_unstable();
+    spps.dedup();
+    if rows.is_empty() {
+        return String::new();
+    }
     let mut s = format!(
-        "\n| baseline (same validation measure) | all | {} |\n|---|---:|{}\n",
+        "\n| validation relMSE by spp | all | {} |\n|---|---:|{}\n",
         spps.iter().map(|n| format!("{n} spp")).collect::<Vec<_>>().join(" | "),
         "---:|".repeat(spps.len())
     );
-    for b in baselines {
-        s += &format!("| {} | {} | {} |\n", b.label, sig4(b.overall), b.by_spp.iter().map(|v| sig4(v.1)).collect::<Vec<_>>().join(" | "));
+    for (label, all, by) in rows {
+        let cells: Vec<String> =
+            spps.iter().map(|n| by.iter().find(|v| v.0 == *n).map_or_else(|| "–".to_string(), |v| sig4(v.1))).collect();
+        s += &format!("| {label} | {} | {} |\n", sig4(all), cells.join(" | "));
     }
     s
 }
@@ -422,8 +447,33 @@ mod tests {
 "#;
         let r = parse_log("x", log).unwrap();
         assert!(r.time_from_steps);
-        assert_eq!(r.vals, vec![Val { step: 2, rel_mse: 0.2, minutes: 1.0 }, Val { step: 3, rel_mse: 0.1, minutes: 2.0 }]);
+        assert_eq!(
+            r.vals,
+            vec![
+                Val { step: 2, rel_mse: 0.2, minutes: 1.0, by_spp: Vec::new() },
+                Val { step: 3, rel_mse: 0.1, minutes: 2.0, by_spp: Vec::new() }
+            ]
+        );
         assert_eq!((r.steps, r.minutes), (4, 2.5));
         assert_eq!(r.best(), 1);
+    }
+
+    #[test]
+    fn validations_split_by_spp_reach_the_table_beside_the_baselines() {
+        let log = r#"{"event":"step","stage":0,"step":1,"loss":0.5,"seconds":1}
+{"event":"val","stage":0,"step":1,"total_step":1,"rel_mse":0.3,"by_spp":[[2,0.5],[8,0.1]],"best":true,"seconds":60}
+{"event":"val","stage":0,"step":2,"total_step":2,"rel_mse":0.2,"by_spp":[[2,0.3],[8,null]],"best":true,"seconds":120}
+"#;
+        let r = parse_log("x", log).unwrap();
+        assert_eq!(r.vals[0].by_spp, vec![(2, 0.5), (8, 0.1)]);
+        assert!(r.vals[1].by_spp[1].1.is_nan());
+        let runs = vec![("g".to_string(), r)];
+        let base = [Baseline { label: "OIDN", overall: 0.25, by_spp: vec![(2, 0.4), (4, 0.2)] }];
+        let t = by_spp_table(&runs, &base);
+        assert!(t.contains("| all | 2 spp | 4 spp | 8 spp |"), "{t}");
+        // The best validation (step 2), its 4-spp cell missing; OIDN without 8 spp.
+        assert!(t.contains("| g, best (step 2) | 0.2000 | 0.3000 | – | NaN |"), "{t}");
+        assert!(t.contains("| OIDN | 0.2500 | 0.4000 | 0.2000 | – |"), "{t}");
+        assert!(parse_log("y", &log.replace("[[2,0.5],[8,0.1]]", "7")).unwrap_err().to_string().contains("y, line 2"));
     }
 }

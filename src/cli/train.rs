@@ -485,7 +485,7 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
                 ));
                 LogLine::Step { stage: *stage, step: *step, loss: *loss, seconds: rounded(*seconds, 4) }
             }
-            Event::Validation { stage, step, total_step, rel_mse, best, seconds } => {
+            Event::Validation { stage, step, total_step, rel_mse, by_spp, best, seconds } => {
                 last_val = Some(*rel_mse);
                 malloc_release::release();
                 LogLine::Val {
@@ -493,6 +493,7 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
                     step: *step,
                     total_step: *total_step,
                     rel_mse: *rel_mse,
+                    by_spp: by_spp.clone(),
                     best: *best,
                     seconds: rounded(*seconds, 2),
                 }
@@ -616,11 +617,39 @@ pub fn iso_date_utc() -> String {
 #[derive(serde::Serialize)]
 #[serde(tag = "event", rename_all = "snake_case")]
 enum LogLine<'a> {
-    Stage { stage: usize, kind: &'a str, steps: usize, from_step: usize, steps_per_epoch: usize, lr_rest: Option<f64>, lr_e: Option<f64> },
-    Step { stage: usize, step: usize, loss: f64, seconds: f64 },
-    Val { stage: usize, step: usize, total_step: usize, rel_mse: f64, best: bool, seconds: f64 },
-    Checkpoint { dir: String },
-    StageEnd { stage: usize, steps: usize, reason: &'a str },
+    Stage {
+        stage: usize,
+        kind: &'a str,
+        steps: usize,
+        from_step: usize,
+        steps_per_epoch: usize,
+        lr_rest: Option<f64>,
+        lr_e: Option<f64>,
+    },
+    Step {
+        stage: usize,
+        step: usize,
+        loss: f64,
+        seconds: f64,
+    },
+    /// `by_spp`: [spp, relMSE] pairs, the same measure at each of the dataset's sample counts.
+    Val {
+        stage: usize,
+        step: usize,
+        total_step: usize,
+        rel_mse: f64,
+        by_spp: Vec<(usize, f64)>,
+        best: bool,
+        seconds: f64,
+    },
+    Checkpoint {
+        dir: String,
+    },
+    StageEnd {
+        stage: usize,
+        steps: usize,
+        reason: &'a str,
+    },
 }
 
 /// `v` to `digits` decimals: timings are logged no finer than they are measured.
@@ -654,8 +683,19 @@ mod tests {
         );
         let step = LogLine::Step { stage: 1, step: 7, loss: f64::NAN, seconds: rounded(0.123_456, 4) };
         assert_eq!(line(step), r#"{"event":"step","stage":1,"step":7,"loss":null,"seconds":0.1235}"#);
-        let val = LogLine::Val { stage: 1, step: 7, total_step: 9, rel_mse: 0.0125, best: true, seconds: rounded(12.345_6, 2) };
-        assert_eq!(line(val), r#"{"event":"val","stage":1,"step":7,"total_step":9,"rel_mse":0.0125,"best":true,"seconds":12.35}"#);
+        let val = LogLine::Val {
+            stage: 1,
+            step: 7,
+            total_step: 9,
+            rel_mse: 0.0125,
+            by_spp: vec![(2, 0.02), (64, 0.005)],
+            best: true,
+            seconds: rounded(12.345_6, 2),
+        };
+        assert_eq!(
+            line(val),
+            r#"{"event":"val","stage":1,"step":7,"total_step":9,"rel_mse":0.0125,"by_spp":[[2,0.02],[64,0.005]],"best":true,"seconds":12.35}"#
+        );
         assert_eq!(line(LogLine::Checkpoint { dir: "a \"b\"".into() }), r#"{"event":"checkpoint","dir":"a \"b\""}"#);
         assert_eq!(
             line(LogLine::StageEnd { stage: 0, steps: 10, reason: "steps done" }),

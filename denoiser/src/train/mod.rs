@@ -158,6 +158,9 @@ pub enum Event<'a> {
         step: usize,
         total_step: usize,
         rel_mse: f64,
+        /// (samples per pixel, the same mean over that count's patches), per dataset spp: the
+        /// issue's floors are per spp.
+        by_spp: Vec<(usize, f64)>,
         best: bool,
         seconds: f64,
     },
@@ -588,7 +591,7 @@ pub fn run(
             // would be thrown away.
             let out_of_time = deadline.is_some_and(|d| elapsed(&started) >= d);
             if st.step.is_multiple_of(val_every) || st.step == stage.steps || out_of_time {
-                if let Some(v) = validate(&model, data, opts)? {
+                if let Some(Validation { overall: v, by_spp }) = validate_by_spp(&model, data, opts)? {
                     let best = st.best_val.is_none_or(|b| v < b);
                     if best {
                         st.best_val = Some(v);
@@ -606,6 +609,7 @@ pub fn run(
                         step: st.step,
                         total_step: st.total_steps,
                         rel_mse: v,
+                        by_spp: data.spps.iter().copied().zip(by_spp).collect(),
                         best,
                         seconds: elapsed(&started),
                     });
