@@ -9,6 +9,7 @@ use film::{exr_io, DescriptorFile, Descriptors};
 
 use super::augment::{self, DescriptorSource, Dihedral};
 use super::patches::{self, PatchSampler, Sampling};
+use super::stored::StoredImage;
 use super::TrainError;
 use crate::preprocess::{
     finite, normalise_descriptor, prepare_target, prepare_without_descriptors, InputTensors, PreparedImage, PreparedTarget, TargetTensors,
@@ -19,8 +20,9 @@ use crate::preprocess::{
 pub struct Shot {
     /// `<split>/<scene>_<shot>` as in shots.jsonl.
     pub name: String,
-    /// Inputs per entry of [`Dataset::spps`], without descriptors (those are shared below).
-    pub images: Vec<PreparedImage>,
+    /// Inputs per entry of [`Dataset::spps`], without descriptors (those are shared below), in
+    /// bf16 while in memory ([`StoredImage`]).
+    pub images: Vec<StoredImage>,
     /// The per-sample descriptors of the largest sample count, read from disk patch by patch
     /// (a 64-spp training set's descriptors outgrow memory); a render at fewer samples uses
     /// the first S of each pixel's (the dataset's lower counts are prefixes).
@@ -123,7 +125,7 @@ pub fn load_shot(root: &Path, dir: &str, spps: &[usize], opts: &LoadOptions) -> 
         frame.descriptors = desc.take();
         let img = prepare_without_descriptors(&frame).map_err(|e| err(&p, e))?;
         desc = frame.descriptors.take();
-        images.push(img);
+        images.push(StoredImage::new(&img));
     }
     let (w, h) = (target.width, target.height);
     if w < opts.patch || h < opts.patch {
@@ -214,9 +216,11 @@ impl Dataset {
 
     /// Bytes held by the prepared arrays (for the memory report); the descriptors stay on disk.
     pub fn bytes(&self) -> usize {
-        let img =
-            |i: &PreparedImage| 4 * (i.diffuse.len() + i.specular.len() + i.g_block.len() + i.path_weight.len()) + i.passthrough.len();
-        self.train.iter().chain(&self.val).map(|s| s.images.iter().map(img).sum::<usize>() + 4 * 9 * s.target.width * s.target.height).sum()
+        self.train
+            .iter()
+            .chain(&self.val)
+            .map(|s| s.images.iter().map(StoredImage::bytes).sum::<usize>() + 4 * 9 * s.target.width * s.target.height)
+            .sum()
     }
 }
 
@@ -290,7 +294,7 @@ pub fn cut(
     margin: usize,
     with_descriptors: bool,
 ) -> Result<(PreparedImage, PreparedTarget), TrainError> {
-    let img = &shot.images[r.spp];
+    let img = shot.images[r.spp].prepared();
     let region = match shot.descriptors.as_ref().filter(|_| with_descriptors) {
         Some(file) => Some(
             Region::read(file, spp, r.x, r.y, patch, img.width)
@@ -298,7 +302,7 @@ pub fn cut(
         ),
         None => None,
     };
-    let crop = augment::cut_image(img, region.as_ref().map(|s| s as &dyn DescriptorSource), r.x, r.y, patch, r.t);
+    let crop = augment::cut_image(&img, region.as_ref().map(|s| s as &dyn DescriptorSource), r.x, r.y, patch, r.t);
     let o = patch - 2 * margin;
     let t = augment::cut_target(&shot.target, r.x + margin, r.y + margin, o, r.t);
     Ok((crop, t))

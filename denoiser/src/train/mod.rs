@@ -20,6 +20,7 @@ pub mod data;
 pub mod pack;
 pub mod patches;
 pub mod schedule;
+pub mod stored;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

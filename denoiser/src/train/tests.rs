@@ -3,7 +3,7 @@ use crate::ensemble::EnsembleConfig;
 use crate::kpcn::KpcnConfig;
 use crate::mskp::{EdgeStopping, MsKpConfig};
 use crate::pathnet::PathNetConfig;
-use crate::preprocess::{prepare, prepare_target, PreparedImage};
+use crate::preprocess::{prepare, prepare_target};
 use checkpoint::flat_values;
 use data::Shot;
 use film::descriptors::{field, FIELDS};
@@ -11,6 +11,7 @@ use film::{Descriptors, Frame, PixelBuffer};
 use patches::PatchSampler;
 use schedule::ScheduleOptions;
 use schedule::{BranchLoss, LossScale};
+use stored::StoredImage;
 
 fn tiny() -> DenoiserConfig {
     DenoiserConfig::new(
@@ -63,11 +64,9 @@ fn shot(name: &str, seed: u64, spps: &[usize]) -> Shot {
             nonfinite_samples: 0,
         }
     };
-    let mut images: Vec<PreparedImage> = Vec::new();
+    let mut images = Vec::new();
     for &s in spps {
-        let mut img = prepare(&noisy(&mut rng, s)).unwrap();
-        img.descriptors = None;
-        images.push(img);
+        images.push(StoredImage::new(&prepare(&noisy(&mut rng, s)).unwrap()));
     }
     // Training reads descriptors from their file, as from a dataset folder. The file is
     // unlinked once open (where the system allows it), so tests leave nothing behind.
