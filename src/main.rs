@@ -38,7 +38,7 @@ enum Command {
     /// Fit a trained model's guide gain (strengths × (N/2)^γ at N spp) on a dataset's
     /// validation shots and write the model with it; the tensors are unchanged.
     Calibrate(cli::calibrate::CalibrateArgs),
-    /// Pack a training checkpoint small enough to commit (exact weights, bf16 optimizer state),
+    /// Pack a training checkpoint small enough to commit (f16 weights, 8-bit optimizer moments),
     /// or unpack one to continue the run on another machine.
     Checkpoint(cli::checkpoint::CheckpointArgs),
     /// Denoise a frame written by `render --aovs` (G, P, both-buffers or guided model).

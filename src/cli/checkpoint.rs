@@ -1,5 +1,6 @@
 //! `pixguide checkpoint pack|unpack`: a training run's checkpoint folder made small enough to
-//! commit (bf16 optimizer state, f16 best weights, exact f32 weights), and back, so that a run
+//! commit (weights in f16, the optimizer's second moments in 8 bits, its first moments dropped:
+//! about 5 bytes a parameter), and back, so that a run
 //! continues on another machine (denoiser/src/train/pack.rs says what is rounded and why).
 
 use anyhow::{Context, Result};

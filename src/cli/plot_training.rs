@@ -49,14 +49,28 @@ pub struct PlotTrainingArgs {
     pub no_oidn: bool,
 }
 
+/// (samples per pixel, relMSE at that count) pairs of one validation.
+type BySpp = Vec<(usize, f64)>;
+
+/// A validation as the log states it, before its wall time is settled.
+struct Logged {
+    total_step: usize,
+    rel_mse: f64,
+    /// Wall seconds, when the log has them.
+    seconds: Option<f64>,
+    /// Step durations summed up to this validation.
+    step_seconds: f64,
+    by_spp: BySpp,
+}
+
 /// One validation of a run.
 #[derive(Clone, Debug, PartialEq)]
 struct Val {
     step: usize,
     rel_mse: f64,
     minutes: f64,
-    /// (spp, relMSE at that sample count); empty in logs written before training logged it.
-    by_spp: Vec<(usize, f64)>,
+    /// Empty in logs written before training logged it.
+    by_spp: BySpp,
 }
 
 /// What a log says about its run.
@@ -117,8 +131,7 @@ fn field_f64(v: &Value, key: &str, what: &str) -> Result<f64> {
 /// Reads a training log; `name` (the file) is named in every error, with the line number where
 /// there is one.
 fn parse_log(name: &str, text: &str) -> Result<Run> {
-    // (total step, relMSE, wall seconds if logged, summed step seconds so far, by spp)
-    let mut vals: Vec<(usize, f64, Option<f64>, f64, Vec<(usize, f64)>)> = Vec::new();
+    let mut vals: Vec<Logged> = Vec::new();
     let mut step_seconds = 0.0;
     let mut stage_steps: BTreeMap<u64, u64> = BTreeMap::new();
     let mut lines = 0;
@@ -165,10 +178,10 @@ fn parse_log(name: &str, text: &str) -> Result<Run> {
                 };
                 // A run resumed from an older checkpoint repeats steps: its new validations
                 // replace those of the abandoned continuation.
-                while vals.last().is_some_and(|l| l.0 >= total) {
+                while vals.last().is_some_and(|l| l.total_step >= total) {
                     vals.pop();
                 }
-                vals.push((total, rel_mse, seconds, step_seconds, by_spp));
+                vals.push(Logged { total_step: total, rel_mse, seconds, step_seconds, by_spp });
             }
             _ => {}
         }
@@ -179,16 +192,16 @@ fn parse_log(name: &str, text: &str) -> Result<Run> {
     if vals.is_empty() {
         bail!("{name}: no validation events in {lines} lines (did the run stop before its first validation?)");
     }
-    let time_from_steps = vals.iter().any(|v| v.2.is_none());
-    let seconds_at = |v: &(usize, f64, Option<f64>, f64, Vec<(usize, f64)>)| if time_from_steps { v.3 } else { v.2.unwrap_or(v.3) };
+    let time_from_steps = vals.iter().any(|v| v.seconds.is_none());
+    let seconds_at = |v: &Logged| if time_from_steps { v.step_seconds } else { v.seconds.unwrap_or(v.step_seconds) };
     let last = &vals[vals.len() - 1];
     // Steps trained after the last validation still count towards the run's length.
-    let minutes = (seconds_at(last) + (step_seconds - last.3)) / 60.0;
-    let steps = (stage_steps.values().sum::<u64>() as usize).max(last.0);
+    let minutes = (seconds_at(last) + (step_seconds - last.step_seconds)) / 60.0;
+    let steps = (stage_steps.values().sum::<u64>() as usize).max(last.total_step);
     let vals: Vec<Val> = vals
         .iter()
-        .filter(|v| v.1.is_finite() && v.1 > 0.0)
-        .map(|v| Val { step: v.0, rel_mse: v.1, minutes: seconds_at(v) / 60.0, by_spp: v.4.clone() })
+        .filter(|v| v.rel_mse.is_finite() && v.rel_mse > 0.0)
+        .map(|v| Val { step: v.total_step, rel_mse: v.rel_mse, minutes: seconds_at(v) / 60.0, by_spp: v.by_spp.clone() })
         .collect();
     if vals.is_empty() {
         bail!("{name}: no validation with a finite, positive relMSE");
@@ -251,7 +264,7 @@ fn table(runs: &[(String, Run)]) -> String {
 /// Each run's best validation split by sample count (runs whose log has the split), and the
 /// baselines on the same measure: the floors are per spp. Empty if there is neither.
 fn by_spp_table(runs: &[(String, Run)], baselines: &[Baseline]) -> String {
-    let mut rows: Vec<(String, f64, Vec<(usize, f64)>)> = Vec::new();
+    let mut rows: Vec<(String, f64, BySpp)> = Vec::new();
     for (label, r) in runs {
         let b = &r.vals[r.best()];
         if !b.by_spp.is_empty() {
