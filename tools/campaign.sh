@@ -131,7 +131,7 @@ wait
 for m in "${models[@]}"; do
     if done_ "$m"; then
         cp "$runs/$m.safetensors" "$runs/$m.safetensors.log.jsonl" "$keep/"
-        rm -rf "$keep/$m.ckpt"
+        rm -rf "$keep/$m.ckpt" "$keep/$m.log.jsonl"
     elif [ -e "$runs/$m.safetensors.ckpt/state.json" ]; then
         rm -rf "$keep/$m.ckpt"
         "$bin" checkpoint pack "$runs/$m.safetensors.ckpt" -o "$keep/$m.ckpt"
