@@ -8,7 +8,7 @@
 use anyhow::{Context, Result};
 use denoiser::metrics::{rel_mse, ToneMap};
 use denoiser::oidn::Oidn;
-use denoiser::train::data::read_index;
+use denoiser::train::data::{read_index, spps_in};
 use denoiser::train::patches;
 use renderer::film::exr_io::read_frame;
 use std::path::Path;
@@ -22,20 +22,6 @@ pub struct Baseline {
     pub by_spp: Vec<(usize, f64)>,
 }
 
-/// Sample counts of a shot folder's `noisy_<S>spp.exr` files, increasing.
-fn spps_in(dir: &Path) -> Result<Vec<usize>> {
-    let mut v: Vec<usize> = std::fs::read_dir(dir)
-        .with_context(|| format!("reading {}", dir.display()))?
-        .flatten()
-        .filter_map(|e| {
-            let n = e.file_name().to_string_lossy().into_owned();
-            n.strip_prefix("noisy_")?.strip_suffix("spp.exr")?.parse().ok()
-        })
-        .collect();
-    v.sort_unstable();
-    Ok(v)
-}
-
 /// Copies the `p × p` window at (x, y) of an interleaved RGB image `w` pixels wide.
 fn window(rgb: &[f32], w: usize, x: usize, y: usize, p: usize) -> Vec<f32> {
     (y..y + p).flat_map(|row| &rgb[3 * (row * w + x)..3 * (row * w + x + p)]).copied().collect()
@@ -46,7 +32,7 @@ fn window(rgb: &[f32], w: usize, x: usize, y: usize, p: usize) -> Vec<f32> {
 pub fn measure(root: &Path, patch: usize, margin: usize, oidn: Option<&Oidn>) -> Result<Vec<Baseline>> {
     let val: Vec<String> = read_index(root)?.into_iter().filter(|(split, _)| split == "val").map(|(_, dir)| dir).collect();
     anyhow::ensure!(!val.is_empty(), "{}: no validation shots in shots.jsonl", root.display());
-    let spps = spps_in(&root.join(&val[0]))?;
+    let spps = spps_in(&root.join(&val[0]));
     anyhow::ensure!(!spps.is_empty(), "{}: no noisy_<S>spp.exr files", root.join(&val[0]).display());
     let labels: Vec<&'static str> = if oidn.is_some() { vec!["noisy", "OIDN"] } else { vec!["noisy"] };
     // sums[method][spp] = (sum, count)

@@ -57,7 +57,8 @@ fn err(path: &Path, msg: impl std::fmt::Display) -> TrainError {
     TrainError::Data(format!("{}: {msg}", path.display()))
 }
 
-fn spps_in(dir: &Path) -> Vec<usize> {
+/// Sample counts of a shot folder's `noisy_<S>spp.exr` files, increasing (none if unreadable).
+pub fn spps_in(dir: &Path) -> Vec<usize> {
     let mut v: Vec<usize> = std::fs::read_dir(dir)
         .into_iter()
         .flatten()
