@@ -80,7 +80,7 @@ train() { # name args...
 }
 # Mean seconds a step of a finished run (from its log), times a factor in percent.
 step_seconds() { # log factor_percent
-    python3 -c "import json,sys; s=[json.loads(l).get('seconds') for l in open(sys.argv[1]) if '\"step\"' in l]; s=[x for x in s if x]; print(int(sum(s)/max(len(s),1)*int(sys.argv[2])/100)+1)" "$1" "$2"
+    python3 -c "import json,sys; s=[d.get('seconds') for d in map(json.loads, open(sys.argv[1])) if d.get('event') == 'step']; s=[x for x in s if x]; print(int(sum(s)/max(len(s),1)*int(sys.argv[2])/100)+1)" "$1" "$2"
 }
 # Starts an ablation only if its plan fits: steps × (parent's s/step × factor) < time left.
 ablation() { # name steps parent factor_percent args...
