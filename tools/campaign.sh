@@ -78,9 +78,10 @@ train() { # name args...
     OMP_NUM_THREADS=1 nice "$bin" --threads 1 train "${common[@]}" -o "$runs/$name.safetensors" \
         --session-minutes "$m" "$@" >>"$runs/$name.out" 2>&1
 }
-# Mean seconds a step of a finished run (from its log), times a factor in percent.
-step_seconds() { # log factor_percent
-    python3 -c "import json,sys; s=[d.get('seconds') for d in map(json.loads, open(sys.argv[1])) if d.get('event') == 'step']; s=[x for x in s if x]; print(int(sum(s)/max(len(s),1)*int(sys.argv[2])/100)+1)" "$1" "$2"
+# Minutes `steps` steps take at the mean s/step of a finished run (its log's step lines) times a
+# factor in percent, plus 3 for loading the data: a float product, rounded up once.
+plan_minutes() { # log steps factor_percent
+    python3 -c "import json,math,sys; s=[d['seconds'] for d in map(json.loads, open(sys.argv[1])) if d.get('event') == 'step' and d.get('seconds')]; print(math.ceil(int(sys.argv[2]) * sum(s) / max(len(s), 1) * int(sys.argv[3]) / 100 / 60) + 3)" "$1" "$2" "$3"
 }
 # Starts an ablation only if its plan fits: steps × (parent's s/step × factor) < time left.
 ablation() { # name steps parent factor_percent args...
@@ -88,7 +89,8 @@ ablation() { # name steps parent factor_percent args...
     shift 4
     done_ "$name" && return 0
     if [ ! -e "$runs/$name.safetensors.ckpt/state.json" ]; then
-        local need=$((steps * $(step_seconds "$runs/$parent.safetensors.log.jsonl" "$factor") / 60 + 3))
+        local need
+        need=$(plan_minutes "$runs/$parent.safetensors.log.jsonl" "$steps" "$factor")
         if [ "$need" -gt "$(left)" ]; then
             echo "$name: needs ~$need min, $(left) left: next session" >>"$runs/$name.out"
             return 0

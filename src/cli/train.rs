@@ -51,6 +51,11 @@ pub struct TrainArgs {
     /// paper.
     #[arg(long, default_value = "default")]
     pub preset: Preset,
+    /// Channel widths of the U-Net columns' levels, from full resolution down, in place of the
+    /// preset's (as many levels as it has: 24,32,48,64,80 for the U-Net presets). The weight
+    /// file records them, so inference needs no option.
+    #[arg(long, value_delimiter = ',', conflicts_with = "all")]
+    pub widths: Option<Vec<usize>>,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Output weights (safetensors). A log `<output>.log.jsonl` is written next to it.
@@ -217,6 +222,17 @@ fn schedule_options(a: &TrainArgs, config: &DenoiserConfig) -> ScheduleOptions {
     o
 }
 
+/// The preset's config with its U-Net columns' level widths replaced by `widths` (if given).
+fn with_widths(mut config: DenoiserConfig, widths: Option<&[usize]>) -> Result<DenoiserConfig> {
+    let Some(widths) = widths else { return Ok(config) };
+    let Some(mskp) = config.mskp.as_mut() else { bail!("--widths: this preset has KPCN columns, not U-Net ones") };
+    if widths.len() != mskp.widths.len() || widths.contains(&0) {
+        bail!("--widths {widths:?}: expected {} positive widths (the preset's are {:?})", mskp.widths.len(), mskp.widths);
+    }
+    mskp.widths = widths.to_vec();
+    Ok(config)
+}
+
 /// One run of the --all plan: variant, method, ablation, preset, its stage lengths
 /// (branch, finetune, joint-or-scratch steps) and the estimated seconds per step on this
 /// machine without other load (docs/training.md), which sets its share of a --minutes budget.
@@ -369,7 +385,7 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
         }
         method = Method::Guided;
     }
-    let config = a.preset.config();
+    let config = with_widths(a.preset.config(), a.widths.as_deref())?;
     if !(0.0..1.0).contains(&a.warmup) {
         bail!("--warmup {}: expected a fraction in [0, 1)", a.warmup);
     }
@@ -679,7 +695,27 @@ fn non_negative(s: &str) -> Result<f64, String> {
 
 #[cfg(test)]
 mod tests {
-    use super::{rounded, LogLine};
+    use super::{rounded, with_widths, LogLine};
+    use denoiser::model::Preset;
+
+    /// --widths replaces the U-Net levels' widths and nothing else, and refuses a wrong count,
+    /// a zero width and a KPCN preset.
+    #[test]
+    fn widths_replace_the_presets_and_are_checked() {
+        let base = Preset::EdgeNoise.config();
+        let wide = with_widths(base.clone(), Some(&[36, 48, 72, 96, 120])).unwrap();
+        assert_eq!(wide.mskp.as_ref().unwrap().widths, vec![36, 48, 72, 96, 120]);
+        let mut same = wide.clone();
+        same.mskp.as_mut().unwrap().widths = base.mskp.as_ref().unwrap().widths.clone();
+        assert_eq!(serde_json::to_string(&same).unwrap(), serde_json::to_string(&base).unwrap());
+        // The columns dominate the cost, and their 3×3 convolutions grow with width².
+        let ratio = wide.macs_per_pixel(8) as f64 / base.macs_per_pixel(8) as f64;
+        assert!(ratio > 1.5 && ratio < 2.25, "{ratio}");
+        assert!(with_widths(base.clone(), Some(&[36, 48, 72, 96])).is_err());
+        assert!(with_widths(base.clone(), Some(&[36, 0, 72, 96, 120])).is_err());
+        assert!(with_widths(Preset::Kpcn.config(), Some(&[36, 48, 72, 96, 120])).is_err());
+        assert_eq!(serde_json::to_string(&with_widths(base.clone(), None).unwrap()).unwrap(), serde_json::to_string(&base).unwrap());
+    }
 
     /// The log lines read exactly as the hand-written JSON they replaced.
     #[test]
