@@ -3,39 +3,33 @@
 
 Why: training's validation (and `pixguide plot-training --baselines`) reports the mean over shots,
 and a few shots where one method fails badly can decide that mean. This prints each shot's
-relMSE (the test metric: tone map (a) of method.md §7.3, eps 1e-4, whole frame) for the noisy
-input, the model and OIDN, and the mean and the median over shots of model / OIDN.
+relMSE for the noisy input, the model and OIDN, as `pixguide denoise --reference` measures it
+(the test metric of docs/results.md, whole frame), and the mean and the median over shots of
+model / OIDN.
 
-    target/mitsuba-venv/bin/python tools/val_per_shot.py DATA WEIGHTS [--model g] [--spp 2,8]
-
-Needs the Mitsuba venv that `pixguide bench` installs (numpy, and mitsuba to read EXR) and a
-release build of pixguide; the denoised frames go to a temporary folder.
+    python3 tools/val_per_shot.py DATA WEIGHTS [--model g] [--spp 2,8] [--bin target/release/pixguide]
 """
 import argparse
 import glob
 import os
+import re
+import statistics
 import subprocess
 import tempfile
 
-import mitsuba as mi
-import numpy as np
-
-mi.set_variant("scalar_rgb")
-
-
-def load(path):
-    return np.array(mi.Bitmap(path))[..., :3].astype(np.float64)
+# `pixguide denoise --reference` prints the noisy and the denoised scores on lines like
+# "    noisy: relMSE 0.05618 (gamma ...)" and " denoised: relMSE 0.00778 (gamma ...)".
+SCORE = re.compile(r"^\s*(noisy|denoised): relMSE ([0-9.eE+-]+)", re.M)
 
 
-def tone_map(c):
-    c = np.maximum(c, 0.0)
-    lum = 0.2126 * c[..., 0] + 0.7152 * c[..., 1] + 0.0722 * c[..., 2]
-    return np.clip((c / (1.0 + lum[..., None] / 1.5)) ** (1.0 / 2.2), 0.0, 1.0)
-
-
-def rel_mse(x, y):
-    x, y = tone_map(x), tone_map(y)
-    return float(((x - y) ** 2 / (y**2 + 1e-4)).mean())
+def scores(binary, frame, reference, extra, out):
+    """(noisy, denoised) relMSE of one `pixguide denoise` run."""
+    r = subprocess.run([binary, "--threads", "1", "denoise", frame, *extra, "--reference", reference, "-o", out],
+                       check=True, capture_output=True, text=True)
+    found = dict((k, float(v)) for k, v in SCORE.findall(r.stdout + r.stderr))
+    if set(found) != {"noisy", "denoised"}:
+        raise SystemExit(f"{frame}: no scores in pixguide's output:\n{r.stdout}{r.stderr}")
+    return found["noisy"], found["denoised"]
 
 
 def main():
@@ -56,21 +50,19 @@ def main():
             ratios, means = [], {"noisy": [], a.model: [], "OIDN": []}
             for d in shots:
                 frame = os.path.join(d, f"noisy_{spp}spp.exr")
-                ref = load(os.path.join(d, "reference.exr"))
-                out = {}
-                for label, extra in ((a.model, ["--model", a.model, "--weights", a.weights]), ("OIDN", ["--model", "oidn"])):
-                    o = os.path.join(tmp, f"{label}.exr")
-                    subprocess.run([a.bin, "--threads", "1", "denoise", frame, *extra, "-o", o], check=True, capture_output=True)
-                    out[label] = rel_mse(load(o), ref)
-                out["noisy"] = rel_mse(load(frame), ref)
-                for k, v in out.items():
+                ref = os.path.join(d, "reference.exr")
+                out = os.path.join(tmp, "out.exr")
+                noisy, model = scores(a.bin, frame, ref, ["--model", a.model, "--weights", a.weights], out)
+                _, oidn = scores(a.bin, frame, ref, ["--model", "oidn"], out)
+                row = {"noisy": noisy, a.model: model, "OIDN": oidn}
+                for k, v in row.items():
                     means[k].append(v)
-                ratios.append(out[a.model] / out["OIDN"])
-                print(f"| {os.path.basename(d)} | {out['noisy']:.4f} | {out[a.model]:.5f} | {out['OIDN']:.5f} | {ratios[-1]:.2f} |")
-            m = {k: np.mean(v) for k, v in means.items()}
+                ratios.append(model / oidn)
+                print(f"| {os.path.basename(d)} | {noisy:.4f} | {model:.5f} | {oidn:.5f} | {ratios[-1]:.2f} |")
+            m = {k: statistics.fmean(v) for k, v in means.items()}
             print(
                 f"| **mean** | {m['noisy']:.4f} | {m[a.model]:.5f} | {m['OIDN']:.5f} | {m[a.model] / m['OIDN']:.2f} (of the means); "
-                f"median of the ratios {np.median(ratios):.2f} |"
+                f"median of the ratios {statistics.median(ratios):.2f} |"
             )
 
 
