@@ -41,6 +41,9 @@ enum Command {
     /// Pack a training checkpoint small enough to commit (f16 weights, 8-bit optimizer moments),
     /// or unpack one to continue the run on another machine.
     Checkpoint(cli::checkpoint::CheckpointArgs),
+    /// Rewrite a trained weight file with its kernels in 8 bits (one scale per row): half the
+    /// f16 file, for shipping.
+    Quantize(cli::quantize::QuantizeArgs),
     /// Denoise a frame written by `render --aovs` (G, P, both-buffers or guided model).
     Denoise(cli::denoise::DenoiseArgs),
     /// Regenerate docs/results.md: every method on the test scenes at each spp — error tables,
@@ -75,6 +78,7 @@ fn main() {
         Command::Train(a) => cli::train::run(a),
         Command::Calibrate(a) => cli::calibrate::run(a),
         Command::Checkpoint(a) => cli::checkpoint::run(a),
+        Command::Quantize(a) => cli::quantize::run(a),
         Command::Denoise(a) => cli::denoise::run(a),
         Command::Eval(a) => cli::eval::run(a),
         Command::PlotTraining(a) => cli::plot_training::run(a),

@@ -46,6 +46,7 @@ pub mod mskp;
 pub mod oidn;
 pub mod pathnet;
 pub mod preprocess;
+pub mod quantize;
 pub mod rng;
 pub mod train;
 pub mod weights;

@@ -22,6 +22,11 @@ pub struct DenoiserConfig {
     /// Columns are multi-scale kernel-predicting U-Nets of these sizes instead of KPCNs.
     #[config(default = "None")]
     pub mskp: Option<MsKpConfig>,
+    /// D_P's U-Net level widths where they differ from `mskp.widths` (as many levels): a guided
+    /// model can then join a D_G trained wider than its D_P (docs/denoiser.md, "Wider columns").
+    /// The both-buffers column keeps `mskp.widths`.
+    #[config(default = "None")]
+    pub p_widths: Option<Vec<usize>>,
     /// Seed of every initial weight (same seed → same weights).
     #[config(default = 0)]
     pub seed: u64,
@@ -43,6 +48,9 @@ impl DenoiserConfig {
         self.ensemble.width /= 2;
         if let Some(m) = &mut self.mskp {
             m.widths.iter_mut().for_each(|w| *w /= 2);
+        }
+        if let Some(w) = &mut self.p_widths {
+            w.iter_mut().for_each(|w| *w /= 2);
         }
         self
     }
@@ -140,6 +148,9 @@ impl DenoiserConfig {
     pub fn mskp_for_branch(&self, v: Variant, diffuse: bool) -> Option<MsKpConfig> {
         self.mskp.clone().map(|mut c| {
             c.in_channels = v.in_channels();
+            if let (Variant::P, Some(w)) = (v, &self.p_widths) {
+                c.widths = w.clone();
+            }
             if c.edge_stopping != EdgeStopping::Off {
                 c.guides = edge_guides(v, c.edge_stopping, diffuse);
             }

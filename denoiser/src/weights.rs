@@ -214,6 +214,9 @@ fn check_config(c: &DenoiserConfig) -> Result<(), String> {
     if let Some((_, name)) = checks.iter().find(|(ok, _)| !ok) {
         return Err(format!("{name} out of range"));
     }
+    if c.mskp.is_none() && c.p_widths.is_some() {
+        return Err("p_widths given for KPCN columns, which have no U-Net levels".into());
+    }
     // The U-Net columns' constructor asserts what these check.
     if let Some(m) = &c.mskp {
         let fewest_inputs = [Variant::G, Variant::P, Variant::GP].iter().map(|v| v.in_channels()).min().unwrap_or(0);
@@ -225,6 +228,7 @@ fn check_config(c: &DenoiserConfig) -> Result<(), String> {
             ((0.0..=4.0).contains(&m.guide_gain_exponent), "mskp.guide_gain_exponent"),
             (m.margin <= 4096, "mskp.margin"),
             (m.guides.len() <= 64, "mskp.guides"),
+            (c.p_widths.as_ref().is_none_or(|w| w.len() == m.widths.len() && w.iter().all(|&w| sane(w))), "p_widths"),
         ];
         if let Some((_, name)) = checks.iter().find(|(ok, _)| !ok) {
             return Err(format!("{name} out of range"));
@@ -262,11 +266,13 @@ fn kernel_weights(c: &DenoiserConfig, method: Method) -> u64 {
 pub fn load(path: &Path, device: &Device) -> Result<Loaded, WeightsError> {
     let bytes = read(path)?;
     let (config, method, preset, provenance) = header(path, &bytes)?;
+    let format = |message: String| WeightsError::Format { path: path.to_path_buf(), message };
+    let int8 = crate::quantize::is_quantized(&bytes).map_err(format)?;
     // Building the model allocates every weight the header's sizes imply; a corrupt size could
-    // ask for terabytes. The file must hold each weight in 2 bytes at least (f16), so a model
-    // larger than that cannot match it.
+    // ask for terabytes. The file must hold each weight in 2 bytes at least (f16; 1 in an 8-bit
+    // file), so a model larger than that cannot match it.
     let needed = kernel_weights(&config, method);
-    if needed.saturating_mul(2) > bytes.len() as u64 {
+    if needed.saturating_mul(if int8 { 1 } else { 2 }) > bytes.len() as u64 {
         return Err(WeightsError::Metadata {
             path: path.to_path_buf(),
             key: keys::CONFIG,
@@ -276,8 +282,10 @@ pub fn load(path: &Path, device: &Device) -> Result<Loaded, WeightsError> {
             ),
         });
     }
+    let bytes = if int8 { crate::quantize::dequantize(&bytes).map_err(format)?.unwrap_or_default() } else { bytes };
     let mut model = MethodModel::init(&config, method, device);
-    // Files are f16 (older ones f32); the networks compute in f32.
+    // Files are f16 (older ones f32, shipped ones 8-bit, dequantised above); the networks
+    // compute in f32.
     let mut store =
         SafetensorsStore::from_bytes(Some(bytes)).allow_partial(true).validate(false).with_from_adapter(FloatCastAdapter::to(DType::F32));
     let result = model.load_from(&mut store).map_err(|e| WeightsError::Format { path: path.to_path_buf(), message: e.to_string() })?;
@@ -388,6 +396,61 @@ mod tests {
             assert!(far > 1e-1 * scale, "{m}: another seed differs by only {far}");
             std::fs::remove_dir_all(path.parent().unwrap()).ok();
         }
+    }
+
+    /// An 8-bit file (`crate::quantize`) is smaller than its f16 original, loads to outputs within
+    /// 2 % of the f16 model's scale for every method (the rounding is ≤ 1/254 of each row's
+    /// largest weight, about 8× f16's on a typical weight), and quantising twice is refused.
+    #[test]
+    fn int8_files_are_smaller_and_load_close() {
+        let d = crate::cpu_device();
+        for m in Method::ALL {
+            let cfg = tiny().with_seed(7);
+            let path = temp(&format!("int8-{}", m.name()));
+            save(&path, &MethodModel::init(&cfg, m, &d), &cfg, "tiny", &Provenance::default()).unwrap();
+            let f16 = std::fs::read(&path).unwrap();
+            let int8 = crate::quantize::quantize(&f16).unwrap();
+            assert!(crate::quantize::quantize(&int8).is_err(), "{m}: quantised twice");
+            let q = path.with_extension("int8.safetensors");
+            std::fs::write(&q, &int8).unwrap();
+            // The tiny models' header and small tensors weigh more than a real model's, whose
+            // files come to about half (docs/denoiser.md, "8-bit weight files").
+            let ratio = int8.len() as f64 / f16.len() as f64;
+            assert!(ratio < 0.75, "{m}: 8-bit file is {ratio:.2} of the f16 one");
+            let (a, b) = (load(&path, &d).unwrap(), load(&q, &d).unwrap());
+            assert_eq!((b.method, b.preset.as_str()), (m, "tiny"));
+            let a = to_vec(a.model.forward(inputs(3, &d)).radiance);
+            let b = to_vec(b.model.forward(inputs(3, &d)).radiance);
+            let scale = a.iter().fold(0f64, |s, v| s.max(v.abs()));
+            let err = a.iter().zip(&b).fold(0f64, |s, (x, y)| s.max((x - y).abs()));
+            assert!(err <= 2e-2 * scale && err > 0.0, "{m}: max error {err} vs scale {scale}");
+            std::fs::remove_dir_all(path.parent().unwrap()).ok();
+        }
+    }
+
+    /// An 8-bit file with a kernel's scales missing, or of another storage, is refused naming
+    /// the file and the tensor or key, not loaded with garbage.
+    #[test]
+    fn broken_int8_files_are_refused_by_name() {
+        let d = crate::cpu_device();
+        let cfg = tiny();
+        let path = temp("int8-broken");
+        save(&path, &MethodModel::init(&cfg, Method::G, &d), &cfg, "tiny", &Provenance::default()).unwrap();
+        let int8 = crate::quantize::quantize(&std::fs::read(&path).unwrap()).unwrap();
+        let st = safetensors::SafeTensors::deserialize(&int8).unwrap();
+        let (_, meta) = safetensors::SafeTensors::read_metadata(&int8).unwrap();
+        let mut meta = meta.metadata().clone().unwrap();
+        let tensors = st.tensors();
+        let dropped = tensors.iter().find(|(n, _)| n.ends_with(".int8_scale")).unwrap().0.clone();
+        let kept: Vec<_> = tensors.iter().filter(|(n, _)| *n != dropped).cloned().collect();
+        std::fs::write(&path, safetensors::serialize(kept.clone(), Some(meta.clone())).unwrap()).unwrap();
+        let e = load(&path, &d).unwrap_err().to_string();
+        assert!(e.contains("w.safetensors") && e.contains(dropped.trim_end_matches(".int8_scale")) && e.contains("missing"), "{e}");
+        meta.insert(crate::quantize::KEY.into(), "int4".into());
+        std::fs::write(&path, safetensors::serialize(tensors.clone(), Some(meta)).unwrap()).unwrap();
+        let e = load(&path, &d).unwrap_err().to_string();
+        assert!(e.contains("w.safetensors") && e.contains("int4"), "{e}");
+        std::fs::remove_dir_all(path.parent().unwrap()).ok();
     }
 
     /// A file whose tensors do not fit its header (here: the header rewritten to claim a wider

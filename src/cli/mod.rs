@@ -10,6 +10,7 @@ pub mod font;
 pub mod oidn_setup;
 pub mod plot_training;
 pub mod progress;
+pub mod quantize;
 pub mod reference;
 pub mod render;
 pub mod sky;

@@ -56,6 +56,11 @@ pub struct TrainArgs {
     /// file records them, so inference needs no option.
     #[arg(long, value_delimiter = ',', conflicts_with = "all")]
     pub widths: Option<Vec<usize>>,
+    /// D_P's level widths where they differ from the other columns' (--widths or the preset's):
+    /// a guided model joining a D_G trained wider than its D_P. The P model it starts from
+    /// (--from-p) must have these widths.
+    #[arg(long, value_delimiter = ',', conflicts_with = "all")]
+    pub p_widths: Option<Vec<usize>>,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Output weights (safetensors). A log `<output>.log.jsonl` is written next to it.
@@ -222,14 +227,21 @@ fn schedule_options(a: &TrainArgs, config: &DenoiserConfig) -> ScheduleOptions {
     o
 }
 
-/// The preset's config with its U-Net columns' level widths replaced by `widths` (if given).
-fn with_widths(mut config: DenoiserConfig, widths: Option<&[usize]>) -> Result<DenoiserConfig> {
-    let Some(widths) = widths else { return Ok(config) };
-    let Some(mskp) = config.mskp.as_mut() else { bail!("--widths: this preset has KPCN columns, not U-Net ones") };
-    if widths.len() != mskp.widths.len() || widths.contains(&0) {
-        bail!("--widths {widths:?}: expected {} positive widths (the preset's are {:?})", mskp.widths.len(), mskp.widths);
+/// The preset's config with its U-Net columns' level widths replaced by `widths` and D_P's by
+/// `p_widths` (each if given).
+fn with_widths(mut config: DenoiserConfig, widths: Option<&[usize]>, p_widths: Option<&[usize]>) -> Result<DenoiserConfig> {
+    for (flag, given) in [("--widths", widths), ("--p-widths", p_widths)] {
+        let Some(given) = given else { continue };
+        let Some(mskp) = config.mskp.as_mut() else { bail!("{flag}: this preset has KPCN columns, not U-Net ones") };
+        if given.len() != mskp.widths.len() || given.contains(&0) {
+            bail!("{flag} {given:?}: expected {} positive widths (the preset's are {:?})", mskp.widths.len(), mskp.widths);
+        }
+        if flag == "--widths" {
+            mskp.widths = given.to_vec();
+        } else {
+            config.p_widths = Some(given.to_vec());
+        }
     }
-    mskp.widths = widths.to_vec();
     Ok(config)
 }
 
@@ -385,7 +397,7 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
         }
         method = Method::Guided;
     }
-    let config = with_widths(a.preset.config(), a.widths.as_deref())?;
+    let config = with_widths(a.preset.config(), a.widths.as_deref(), a.p_widths.as_deref())?;
     if !(0.0..1.0).contains(&a.warmup) {
         bail!("--warmup {}: expected a fraction in [0, 1)", a.warmup);
     }
@@ -696,6 +708,7 @@ fn non_negative(s: &str) -> Result<f64, String> {
 #[cfg(test)]
 mod tests {
     use super::{rounded, with_widths, LogLine};
+    use denoiser::kpcn::Variant;
     use denoiser::model::Preset;
 
     /// --widths replaces the U-Net levels' widths and nothing else, and refuses a wrong count,
@@ -703,7 +716,7 @@ mod tests {
     #[test]
     fn widths_replace_the_presets_and_are_checked() {
         let base = Preset::EdgeNoise.config();
-        let wide = with_widths(base.clone(), Some(&[36, 48, 72, 96, 120])).unwrap();
+        let wide = with_widths(base.clone(), Some(&[36, 48, 72, 96, 120]), None).unwrap();
         assert_eq!(wide.mskp.as_ref().unwrap().widths, vec![36, 48, 72, 96, 120]);
         let mut same = wide.clone();
         same.mskp.as_mut().unwrap().widths = base.mskp.as_ref().unwrap().widths.clone();
@@ -711,10 +724,18 @@ mod tests {
         // The columns dominate the cost, and their 3×3 convolutions grow with width².
         let ratio = wide.macs_per_pixel(8) as f64 / base.macs_per_pixel(8) as f64;
         assert!(ratio > 1.5 && ratio < 2.25, "{ratio}");
-        assert!(with_widths(base.clone(), Some(&[36, 48, 72, 96])).is_err());
-        assert!(with_widths(base.clone(), Some(&[36, 0, 72, 96, 120])).is_err());
-        assert!(with_widths(Preset::Kpcn.config(), Some(&[36, 48, 72, 96, 120])).is_err());
-        assert_eq!(serde_json::to_string(&with_widths(base.clone(), None).unwrap()).unwrap(), serde_json::to_string(&base).unwrap());
+        assert!(with_widths(base.clone(), Some(&[36, 48, 72, 96]), None).is_err());
+        assert!(with_widths(base.clone(), Some(&[36, 0, 72, 96, 120]), None).is_err());
+        assert!(with_widths(Preset::Kpcn.config(), Some(&[36, 48, 72, 96, 120]), None).is_err());
+        assert_eq!(serde_json::to_string(&with_widths(base.clone(), None, None).unwrap()).unwrap(), serde_json::to_string(&base).unwrap());
+        // --p-widths sets D_P's widths alone: D_G and the both-buffers column keep --widths.
+        let narrow = base.mskp.as_ref().unwrap().widths.clone();
+        let mixed = with_widths(base.clone(), Some(&[36, 48, 72, 96, 120]), Some(&narrow)).unwrap();
+        assert_eq!(mixed.mskp_for(Variant::G).unwrap().widths, vec![36, 48, 72, 96, 120]);
+        assert_eq!(mixed.mskp_for(Variant::GP).unwrap().widths, vec![36, 48, 72, 96, 120]);
+        assert_eq!(mixed.mskp_for(Variant::P).unwrap().widths, narrow);
+        assert!(with_widths(base.clone(), None, Some(&[36, 48])).is_err());
+        assert!(with_widths(Preset::Kpcn.config(), None, Some(&[36, 48, 72, 96, 120])).is_err());
     }
 
     /// The log lines read exactly as the hand-written JSON they replaced.

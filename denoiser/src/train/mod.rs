@@ -31,6 +31,7 @@ use burn::module::{Module, ModuleVisitor, ParamId};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor};
 
+use crate::kpcn::Variant;
 use crate::loss::{l1, l1_tonemapped, path_disentangling_loss, rel_l2, rel_mse_test, relative_to_input};
 use crate::method::{BranchNets, Method, MethodModel, MethodOutput};
 use crate::model::DenoiserConfig;
@@ -203,8 +204,11 @@ fn load_pretrained(path: &Path, want: Method, cfg: &DenoiserConfig, device: &Dev
     if l.method != want {
         return Err(TrainError::Options(format!("{}: holds a {} model, expected {want}", path.display(), l.method)));
     }
+    // The column this run takes from the file (D_G or D_P, at its own widths) and the PathNet.
+    let variant = if want == Method::P { Variant::P } else { Variant::G };
     let sizes = |c: &DenoiserConfig| {
-        [serde_json::to_string(&c.kpcn), serde_json::to_string(&c.pathnet), serde_json::to_string(&c.mskp)].map(Result::unwrap_or_default)
+        [serde_json::to_string(&c.kpcn), serde_json::to_string(&c.pathnet), serde_json::to_string(&c.mskp_for(variant))]
+            .map(Result::unwrap_or_default)
     };
     if sizes(&l.config) != sizes(cfg) {
         return Err(TrainError::Options(format!(

@@ -350,6 +350,39 @@ fn guided_starts_from_pretrained_files_and_trains_them() {
     assert!(matches!(initial_model(&o, Some(&gp), Some(&gp), &dev), Err(TrainError::Options(_))));
 }
 
+/// A guided model may join a D_G trained wider than its D_P (`p_widths`): each column loads
+/// from a file of its own widths, a P file of the D_G's widths is refused by name, the joint
+/// stage trains the mixed model, and its weight file loads back with both widths.
+#[test]
+fn guided_joins_a_wider_d_g_with_a_narrower_d_p() {
+    let data = dataset();
+    let dev = crate::cpu_training_device();
+    let dir = tmpdir("mixed-widths");
+    let column = |w: Vec<usize>| Some(MsKpConfig::new(34).with_widths(w).with_kernel_scales(2).with_filter_size(3).with_margin(2));
+    let (wide, narrow) = (vec![8, 10, 12], vec![6, 8, 8]);
+    let mut o = options(Method::Guided, None, &short());
+    o.config = tiny().with_mskp(column(wide.clone())).with_p_widths(Some(narrow.clone()));
+    let save = |m: Method, widths: &[usize]| {
+        let cfg = tiny().with_mskp(column(widths.to_vec()));
+        let path = dir.join(format!("{m}-{}.safetensors", widths[0]));
+        crate::weights::save(&path, &MethodModel::init(&cfg, m, &dev), &cfg, "tiny", &Default::default()).unwrap();
+        path
+    };
+    let (g_wide, p_narrow, p_wide) = (save(Method::G, &wide), save(Method::P, &narrow), save(Method::P, &wide));
+    let err = initial_model(&o, Some(&g_wide), Some(&p_wide), &dev).err().expect("a P file of D_G's widths must be refused");
+    assert!(err.to_string().contains(&*p_wide.to_string_lossy()), "{err}");
+    let start = initial_model(&o, Some(&g_wide), Some(&p_narrow), &dev).unwrap();
+    let end = run(&data, &o, start, None, false, &mut |_| {}).unwrap();
+    assert!(end.best_val.is_some_and(f64::is_finite));
+    let path = dir.join("guided.safetensors");
+    let cfg = effective_config(&o);
+    crate::weights::save(&path, &end.model, &cfg, "tiny", &Default::default()).unwrap();
+    let back = crate::weights::load(&path, &dev).unwrap();
+    assert_eq!(back.config.mskp_for(Variant::G).unwrap().widths, wide);
+    assert_eq!(back.config.mskp_for(Variant::P).unwrap().widths, narrow);
+    assert_eq!(checkpoint::parameters(&back.model).len(), checkpoint::parameters(&end.model).len());
+}
+
 /// A stage cut short by `--minutes` validates its last step, so the steps after the last
 /// periodic validation count (the stage keeps its best validated weights). Here validation is
 /// only periodic every 1000 steps and the budget (1 s) ends the stage long before that: the
