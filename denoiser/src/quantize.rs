@@ -14,6 +14,8 @@ use std::collections::HashMap;
 
 use safetensors::{Dtype, SafeTensors};
 
+use crate::weights::{serialize_tensors as serialize, tensor_floats as floats, OwnedTensor};
+
 /// Metadata key naming the storage; absent for f16/f32 files.
 pub const KEY: &str = "pixguide.storage";
 /// The one storage this module writes.
@@ -22,25 +24,6 @@ const SCALE_SUFFIX: &str = ".int8_scale";
 /// Tensors smaller than this stay unquantised: they cost little and some (guide strengths,
 /// gains) are single numbers that a row scale would not help.
 const MIN_ELEMENTS: usize = 256;
-
-type Owned = (String, Dtype, Vec<usize>, Vec<u8>);
-
-fn floats(name: &str, dtype: Dtype, data: &[u8]) -> Result<Vec<f32>, String> {
-    match dtype {
-        Dtype::F32 => Ok(data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()),
-        Dtype::F16 => Ok(data.chunks_exact(2).map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32()).collect()),
-        d => Err(format!("tensor `{name}` is {d:?}, expected f32 or f16")),
-    }
-}
-
-fn serialize(mut out: Vec<Owned>, meta: HashMap<String, String>) -> Result<Vec<u8>, String> {
-    out.sort_by(|a, b| a.0.cmp(&b.0));
-    let views = out
-        .iter()
-        .map(|(n, dt, s, b)| Ok((n.clone(), safetensors::tensor::TensorView::new(*dt, s.clone(), b).map_err(|e| format!("`{n}`: {e}"))?)))
-        .collect::<Result<Vec<_>, String>>()?;
-    safetensors::serialize(views, Some(meta)).map_err(|e| e.to_string())
-}
 
 /// Whether the file's metadata marks 8-bit storage (an error for a storage this program does not
 /// know).
@@ -60,7 +43,7 @@ pub fn quantize(bytes: &[u8]) -> Result<Vec<u8>, String> {
     }
     let (_, meta) = SafeTensors::read_metadata(bytes).map_err(|e| e.to_string())?;
     let st = SafeTensors::deserialize(bytes).map_err(|e| e.to_string())?;
-    let mut out: Vec<Owned> = Vec::new();
+    let mut out: Vec<OwnedTensor> = Vec::new();
     for (name, t) in st.tensors() {
         let shape = t.shape().to_vec();
         let n: usize = shape.iter().product();
@@ -97,7 +80,7 @@ pub fn dequantize(bytes: &[u8]) -> Result<Option<Vec<u8>>, String> {
     let (_, meta) = SafeTensors::read_metadata(bytes).map_err(|e| e.to_string())?;
     let st = SafeTensors::deserialize(bytes).map_err(|e| e.to_string())?;
     let tensors: HashMap<String, _> = st.tensors().into_iter().collect();
-    let mut out: Vec<Owned> = Vec::new();
+    let mut out: Vec<OwnedTensor> = Vec::new();
     for (name, t) in &tensors {
         if let Some(kernel) = name.strip_suffix(SCALE_SUFFIX) {
             if !tensors.get(kernel).is_some_and(|k| k.dtype() == Dtype::I8) {

@@ -167,13 +167,9 @@ fn convert_weights(from: &Path, to: &Path, dtype: safetensors::Dtype) -> Result<
     let bytes = std::fs::read(from).map_err(|e| err(from, e))?;
     let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes).map_err(|e| err(from, e))?;
     let st = safetensors::SafeTensors::deserialize(&bytes).map_err(|e| err(from, e))?;
-    let mut out: Vec<(String, safetensors::Dtype, Vec<usize>, Vec<u8>)> = Vec::new();
+    let mut out: Vec<crate::weights::OwnedTensor> = Vec::new();
     for (name, t) in st.tensors() {
-        let values: Vec<f32> = match t.dtype() {
-            safetensors::Dtype::F32 => t.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect(),
-            safetensors::Dtype::F16 => t.data().chunks_exact(2).map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32()).collect(),
-            d => return Err(err(from, format!("tensor `{name}` is {d:?}, expected f32 or f16"))),
-        };
+        let values = crate::weights::tensor_floats(&name, t.dtype(), t.data()).map_err(|m| err(from, m))?;
         // Converted once; kept only if no finite value became infinite.
         let halves = (dtype == safetensors::Dtype::F16)
             .then(|| values.iter().map(|&v| half::f16::from_f32(v)).collect::<Vec<_>>())
@@ -184,13 +180,8 @@ fn convert_weights(from: &Path, to: &Path, dtype: safetensors::Dtype) -> Result<
         };
         out.push((name, dt, t.shape().to_vec(), raw));
     }
-    out.sort_by(|a, b| a.0.cmp(&b.0));
-    let views = out
-        .iter()
-        .map(|(n, dt, s, b)| Ok((n.clone(), safetensors::tensor::TensorView::new(*dt, s.clone(), b).map_err(|e| err(from, e))?)))
-        .collect::<Result<Vec<_>, TrainError>>()?;
     let meta: std::collections::HashMap<String, String> = meta.metadata().clone().unwrap_or_default();
-    let data = safetensors::serialize(views, Some(meta)).map_err(|e| err(to, e))?;
+    let data = crate::weights::serialize_tensors(out, meta).map_err(|m| err(to, m))?;
     write_atomically(to, &data)
 }
 
