@@ -52,7 +52,12 @@ def main():
                 frame = os.path.join(d, f"noisy_{spp}spp.exr")
                 ref = os.path.join(d, "reference.exr")
                 out = os.path.join(tmp, "out.exr")
-                noisy, model = scores(a.bin, frame, ref, ["--model", a.model, "--weights", a.weights], out)
+                extra = ["--model", a.model, "--weights", a.weights]
+                if a.model != "g":
+                    # The dataset keeps one descriptor file of the most samples; a frame at N spp
+                    # uses its first N samples (the shots are nested).
+                    extra += ["--descriptors", max(glob.glob(os.path.join(d, "descriptors_*spp.safetensors")), key=len)]
+                noisy, model = scores(a.bin, frame, ref, extra, out)
                 _, oidn = scores(a.bin, frame, ref, ["--model", "oidn"], out)
                 row = {"noisy": noisy, a.model: model, "OIDN": oidn}
                 for k, v in row.items():

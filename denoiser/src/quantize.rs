@@ -83,7 +83,7 @@ pub fn dequantize(bytes: &[u8]) -> Result<Option<Vec<u8>>, String> {
     let mut out: Vec<OwnedTensor> = Vec::new();
     for (name, t) in &tensors {
         if let Some(kernel) = name.strip_suffix(SCALE_SUFFIX) {
-            if !tensors.get(kernel).is_some_and(|k| k.dtype() == Dtype::I8) {
+            if tensors.get(kernel).is_none_or(|k| k.dtype() != Dtype::I8) {
                 return Err(format!("tensor `{name}`: scales of no 8-bit tensor `{kernel}`"));
             }
             continue;

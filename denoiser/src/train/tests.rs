@@ -369,7 +369,7 @@ fn guided_joins_a_wider_d_g_with_a_narrower_d_p() {
         path
     };
     let (g_wide, p_narrow, p_wide) = (save(Method::G, &wide), save(Method::P, &narrow), save(Method::P, &wide));
-    let err = initial_model(&o, Some(&g_wide), Some(&p_wide), &dev).err().expect("a P file of D_G's widths must be refused");
+    let err = initial_model(&o, Some(&g_wide), Some(&p_wide), &dev).expect_err("a P file of D_G's widths must be refused");
     assert!(err.to_string().contains(&*p_wide.to_string_lossy()), "{err}");
     let start = initial_model(&o, Some(&g_wide), Some(&p_narrow), &dev).unwrap();
     let end = run(&data, &o, start, None, false, &mut |_| {}).unwrap();
