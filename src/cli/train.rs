@@ -43,6 +43,9 @@ pub struct TrainArgs {
     /// Trained P model the guided model starts from; with --method p, the warm start.
     #[arg(long)]
     pub from_p: Option<PathBuf>,
+    /// With --method both, the both-buffers model this run continues from (warm start).
+    #[arg(long, conflicts_with_all = ["from_g", "from_p"])]
+    pub from_both: Option<PathBuf>,
     /// Network sizes: default (multi-scale kernel-predicting U-Net columns), half (50 % of
     /// default's channels), swap (default with the patented low-band-swap compositor at five
     /// scales, opt-in), edge (default at five scales with edge-stopping kernels and
@@ -442,7 +445,11 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
     };
 
     let device = backend.training_device().map_err(anyhow::Error::msg)?;
-    let model = tr::initial_model(&opts, a.from_g.as_deref(), a.from_p.as_deref(), &device)?;
+    let model = match &a.from_both {
+        Some(f) if method == Method::Both => tr::warm_start(&opts, f, &device)?,
+        Some(_) => bail!("--from-both goes with --method both"),
+        None => tr::initial_model(&opts, a.from_g.as_deref(), a.from_p.as_deref(), &device)?,
+    };
     let descriptors = method.needs_descriptors();
     let k = match cache.iter().position(|c| c.0 == descriptors) {
         Some(k) => k,

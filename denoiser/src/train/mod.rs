@@ -205,7 +205,11 @@ fn load_pretrained(path: &Path, want: Method, cfg: &DenoiserConfig, device: &Dev
         return Err(TrainError::Options(format!("{}: holds a {} model, expected {want}", path.display(), l.method)));
     }
     // The column this run takes from the file (D_G or D_P, at its own widths) and the PathNet.
-    let variant = if want == Method::P { Variant::P } else { Variant::G };
+    let variant = match want {
+        Method::P => Variant::P,
+        Method::Both => Variant::GP,
+        _ => Variant::G,
+    };
     let sizes = |c: &DenoiserConfig| {
         [serde_json::to_string(&c.kpcn), serde_json::to_string(&c.pathnet), serde_json::to_string(&c.mskp_for(variant))]
             .map(Result::unwrap_or_default)
@@ -259,6 +263,15 @@ pub fn initial_model(
         take(&mut model.specular, gm.specular, pm.specular);
     }
     Ok(model)
+}
+
+/// A run of a single-column method (g, p or both) that continues from a trained model of its
+/// own method and sizes (warm start: the run's stages, a fresh optimiser).
+pub fn warm_start(opts: &TrainOptions, from: &Path, device: &Device) -> Result<MethodModel, TrainError> {
+    if opts.method == Method::Guided {
+        return Err(TrainError::Options("the guided method starts from G and P models: give --from-g and --from-p".into()));
+    }
+    load_pretrained(from, opts.method, &effective_config(opts), device)
 }
 
 /// Sets which sub-modules get gradients in `stage` (frozen = no gradient at all, which also

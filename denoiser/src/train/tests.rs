@@ -350,6 +350,29 @@ fn guided_starts_from_pretrained_files_and_trains_them() {
     assert!(matches!(initial_model(&o, Some(&gp), Some(&gp), &dev), Err(TrainError::Options(_))));
 }
 
+/// A both-buffers run can continue from a both file (the file's weights, not fresh ones), and
+/// is refused a G file or the guided method by name.
+#[test]
+fn both_warm_starts_from_its_own_kind_only() {
+    let dev = crate::cpu_training_device();
+    let dir = tmpdir("warm-both");
+    let o = options(Method::Both, None, &short());
+    let cfg = effective_config(&o);
+    let save = |m: Method, seed: u64| {
+        let path = dir.join(format!("{m}.safetensors"));
+        crate::weights::save(&path, &MethodModel::init(&cfg.clone().with_seed(seed), m, &dev), &cfg, "tiny", &Default::default()).unwrap();
+        path
+    };
+    let (both, g) = (save(Method::Both, 21), save(Method::G, 22));
+    let stored = crate::weights::load(&both, &dev).unwrap().model;
+    let warm = warm_start(&o, &both, &dev).unwrap();
+    assert_eq!(flat_values(&warm), flat_values(&stored));
+    assert_ne!(flat_values(&warm), flat_values(&initial_model(&o, None, None, &dev).unwrap()));
+    let err = warm_start(&o, &g, &dev).expect_err("a G file cannot start a both run");
+    assert!(err.to_string().contains("g.safetensors") && err.to_string().contains("expected both"), "{err}");
+    assert!(warm_start(&options(Method::Guided, None, &short()), &both, &dev).is_err());
+}
+
 /// A guided model may join a D_G trained wider than its D_P (`p_widths`): each column loads
 /// from a file of its own widths, a P file of the D_G's widths is refused by name, the joint
 /// stage trains the mixed model, and its weight file loads back with both widths.
