@@ -239,8 +239,7 @@ pub fn initial_model(
     let mut model = MethodModel::init(&cfg, opts.method, device);
     // A single-column method may start from a trained model of its own kind (warm start).
     match (opts.method, from_g, from_p) {
-        (Method::G, Some(g), None) => model = load_pretrained(g, Method::G, &cfg, device)?,
-        (Method::P, None, Some(p)) => model = load_pretrained(p, Method::P, &cfg, device)?,
+        (Method::G, Some(f), None) | (Method::P, None, Some(f)) => model = warm_start(opts, f, device)?,
         (Method::Guided, _, _) | (_, None, None) => {}
         (m, _, _) => {
             return Err(TrainError::Options(format!(
