@@ -46,6 +46,10 @@ pub struct TrainArgs {
     /// With --method both, the both-buffers model this run continues from (warm start).
     #[arg(long, conflicts_with_all = ["from_g", "from_p"])]
     pub from_both: Option<PathBuf>,
+    /// With --method guided, the trained guided model this run continues from (warm start,
+    /// E included): e.g. `--joint-steps 0 --guided-finetune-steps N` finetunes it.
+    #[arg(long, conflicts_with_all = ["from_g", "from_p", "from_both"])]
+    pub from_guided: Option<PathBuf>,
     /// Network sizes: default (multi-scale kernel-predicting U-Net columns), half (50 % of
     /// default's channels), swap (default with the patented low-band-swap compositor at five
     /// scales, opt-in), edge (default at five scales with edge-stopping kernels and
@@ -111,6 +115,11 @@ pub struct TrainArgs {
     /// Steps of full-n-full (guided from scratch).
     #[arg(long)]
     pub scratch_steps: Option<usize>,
+    /// Guided and radiance-only: steps of a finetune of the whole model after the joint stage,
+    /// with --finetune-loss at --lr-finetune on the blended radiance [default: 0, the paper's
+    /// schedule]. With --joint-steps 0 and --from-guided it finetunes a trained guided model.
+    #[arg(long)]
+    pub guided_finetune_steps: Option<usize>,
     /// Peak rate of the per-branch stage [default: the backbone's measured peak: 1e-3 for
     /// the U-Net presets, the paper's 1e-4 for KPCN ones]. Joint and from-scratch rates follow
     /// the backbone too (docs/training.md, "Learning rate").
@@ -209,6 +218,7 @@ fn schedule_options(a: &TrainArgs, config: &DenoiserConfig) -> ScheduleOptions {
     set(&mut o.finetune_steps, a.finetune_steps);
     set(&mut o.joint_steps, a.joint_steps);
     set(&mut o.scratch_steps, a.scratch_steps);
+    set(&mut o.guided_finetune_steps, a.guided_finetune_steps);
     let setf = |dst: &mut f64, v: Option<f64>| {
         if let Some(v) = v {
             *dst = v
@@ -445,10 +455,12 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
     };
 
     let device = backend.training_device().map_err(anyhow::Error::msg)?;
-    let model = match &a.from_both {
-        Some(f) if method == Method::Both => tr::warm_start(&opts, f, &device)?,
-        Some(_) => bail!("--from-both goes with --method both"),
-        None => tr::initial_model(&opts, a.from_g.as_deref(), a.from_p.as_deref(), &device)?,
+    let model = match (&a.from_both, &a.from_guided) {
+        (Some(f), _) if method == Method::Both => tr::warm_start(&opts, f, &device)?,
+        (Some(_), _) => bail!("--from-both goes with --method both"),
+        (_, Some(f)) if method == Method::Guided => tr::warm_start(&opts, f, &device)?,
+        (_, Some(_)) => bail!("--from-guided goes with --method guided"),
+        (None, None) => tr::initial_model(&opts, a.from_g.as_deref(), a.from_p.as_deref(), &device)?,
     };
     let descriptors = method.needs_descriptors();
     let k = match cache.iter().position(|c| c.0 == descriptors) {

@@ -204,15 +204,21 @@ fn load_pretrained(path: &Path, want: Method, cfg: &DenoiserConfig, device: &Dev
     if l.method != want {
         return Err(TrainError::Options(format!("{}: holds a {} model, expected {want}", path.display(), l.method)));
     }
-    // The column this run takes from the file (D_G or D_P, at its own widths) and the PathNet.
-    let variant = match want {
-        Method::P => Variant::P,
-        Method::Both => Variant::GP,
-        _ => Variant::G,
+    // The columns this run takes from the file (D_G and/or D_P, at their own widths) and the
+    // PathNet.
+    let variants: &[Variant] = match want {
+        Method::P => &[Variant::P],
+        Method::Both => &[Variant::GP],
+        Method::Guided => &[Variant::G, Variant::P],
+        Method::G => &[Variant::G],
     };
     let sizes = |c: &DenoiserConfig| {
-        [serde_json::to_string(&c.kpcn), serde_json::to_string(&c.pathnet), serde_json::to_string(&c.mskp_for(variant))]
-            .map(Result::unwrap_or_default)
+        let mut s = vec![serde_json::to_string(&c.kpcn), serde_json::to_string(&c.pathnet)];
+        s.extend(variants.iter().map(|&v| serde_json::to_string(&c.mskp_for(v))));
+        if want == Method::Guided {
+            s.push(serde_json::to_string(&c.ensemble));
+        }
+        s.into_iter().map(Result::unwrap_or_default).collect::<Vec<_>>()
     };
     if sizes(&l.config) != sizes(cfg) {
         return Err(TrainError::Options(format!(
@@ -264,11 +270,16 @@ pub fn initial_model(
     Ok(model)
 }
 
-/// A run of a single-column method (g, p or both) that continues from a trained model of its
-/// own method and sizes (warm start: the run's stages, a fresh optimiser).
+/// A run that continues from a trained model of its own method and sizes (warm start: the run's
+/// stages, a fresh optimiser): g, p, both, or a whole guided model (E included), which a
+/// guided finetune starts from.
 pub fn warm_start(opts: &TrainOptions, from: &Path, device: &Device) -> Result<MethodModel, TrainError> {
-    if opts.method == Method::Guided {
-        return Err(TrainError::Options("the guided method starts from G and P models: give --from-g and --from-p".into()));
+    if opts.ablation.is_some() {
+        return Err(TrainError::Options(format!(
+            "{}: ablations start from G and P models, not from a trained {} model",
+            from.display(),
+            opts.method
+        )));
     }
     load_pretrained(from, opts.method, &effective_config(opts), device)
 }

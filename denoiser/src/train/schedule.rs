@@ -184,6 +184,12 @@ pub struct ScheduleOptions {
     /// The finetune stage's loss.
     #[serde(default)]
     pub finetune_loss: FinetuneLoss,
+    /// Steps of a finetune of the whole guided model (E, columns and PathNets at
+    /// `lr_finetune`, `finetune_loss` on the blended radiance) after its joint stage; 0 = none,
+    /// the paper's schedule. The joint loss weighs each branch in its own units; this stage
+    /// trains the blend on the measure the evaluation uses (docs/training.md, "Guided finetune").
+    #[serde(default)]
+    pub guided_finetune_steps: usize,
     /// The branch and joint losses.
     #[serde(flatten)]
     pub loss: BranchLoss,
@@ -205,6 +211,7 @@ impl Default for ScheduleOptions {
             w_path: 0.1,
             lr_shape: LrShape::WarmupCosine { warmup: 0.05 },
             finetune_loss: FinetuneLoss::Linear,
+            guided_finetune_steps: 0,
             loss: BranchLoss::default(),
         }
     }
@@ -239,7 +246,7 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
     let path = |m: Method| if m.needs_descriptors() { o.w_path } else { 0.0 };
     match (method, ablation) {
         (Method::Guided, None) | (Method::Guided, Some(Ablation::RadianceOnly)) => {
-            vec![Stage {
+            let joint = Stage {
                 kind: StageKind::Joint,
                 steps: o.joint_steps,
                 lr_rest: Some(o.lr_joint_rest),
@@ -247,7 +254,17 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 w_path: o.w_path,
                 shape: o.lr_shape,
                 loss: o.loss,
-            }]
+            };
+            let finetune = (o.guided_finetune_steps > 0).then(|| Stage {
+                kind: o.finetune_loss.stage_kind(),
+                steps: o.guided_finetune_steps,
+                lr_rest: Some(o.lr_finetune),
+                lr_e: Some(o.lr_finetune),
+                w_path: 0.0,
+                shape: o.lr_shape,
+                loss: finetune_loss(o),
+            });
+            std::iter::once(joint).chain(finetune).collect()
         }
         (_, Some(Ablation::FixNTrain)) => {
             // Frozen PathNets get no L_path either.
@@ -289,11 +306,15 @@ pub fn plan(method: Method, ablation: Option<Ablation>, o: &ScheduleOptions) -> 
                 lr_e: None,
                 w_path: 0.0,
                 shape: o.lr_shape,
-                // The finetune losses are on radiance and take no relative L2 term.
-                loss: BranchLoss { rel_l2_weight: 0.0, rel_l2_inside: false, ..o.loss },
+                loss: finetune_loss(o),
             },
         ],
     }
+}
+
+/// The finetune losses are on radiance and take no relative L2 term.
+fn finetune_loss(o: &ScheduleOptions) -> BranchLoss {
+    BranchLoss { rel_l2_weight: 0.0, rel_l2_inside: false, ..o.loss }
 }
 
 /// Whether the method/ablation starts from pretrained G and P models.

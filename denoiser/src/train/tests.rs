@@ -373,6 +373,44 @@ fn both_warm_starts_from_its_own_kind_only() {
     assert!(warm_start(&options(Method::Guided, None, &short()), &both, &dev).is_err());
 }
 
+/// A guided finetune (`guided_finetune_steps`) continues a whole guided file, E included, and
+/// trains every part of it on the blended radiance; an ablation cannot warm-start from it.
+#[test]
+fn guided_finetune_continues_a_guided_file_and_trains_all_of_it() {
+    let data = dataset();
+    let dev = crate::cpu_training_device();
+    let dir = tmpdir("guided-finetune");
+    let sched = ScheduleOptions { joint_steps: 0, guided_finetune_steps: 3, lr_finetune: 1e-3, ..short() };
+    let o = options(Method::Guided, None, &sched);
+    let kinds: Vec<_> = o.stages.iter().map(|s| (s.kind, s.steps, s.lr_e.is_some(), s.lr_rest.is_some())).collect();
+    assert_eq!(kinds, [(StageKind::Joint, 0, true, true), (StageKind::Finetune, 3, true, true)]);
+    assert_eq!(schedule::plan(Method::Guided, None, &short()).len(), 1, "the paper's schedule has no guided finetune");
+    let cfg = effective_config(&o);
+    let path = dir.join("guided.safetensors");
+    std::fs::create_dir_all(&dir).unwrap();
+    crate::weights::save(&path, &MethodModel::init(&cfg.clone().with_seed(31), Method::Guided, &dev), &cfg, "tiny", &Default::default())
+        .unwrap();
+    let stored = crate::weights::load(&path, &dev).unwrap().model;
+    let start = warm_start(&o, &path, &dev).unwrap();
+    assert_eq!(flat_values(&start), flat_values(&stored));
+    let e_before = e_values(&start);
+    let before = flat_values(&start);
+    let end = run(&data, &o, start, None, false, &mut |_| {}).unwrap();
+    assert!(end.best_val.is_some_and(f64::is_finite));
+    let after = flat_values(&end.model);
+    assert_ne!(e_values(&end.model), e_before, "E must train in the guided finetune");
+    let moved = before.iter().zip(&after).filter(|(a, b)| a != b).count();
+    assert!(moved > e_before.len(), "the columns must train too: {moved} values moved, E has {}", e_before.len());
+    let ro = options(Method::Guided, Some(Ablation::RadianceOnly), &sched);
+    let err = warm_start(&ro, &path, &dev).expect_err("an ablation starts from G and P files");
+    assert!(err.to_string().contains("guided.safetensors"), "{err}");
+}
+
+fn e_values(model: &MethodModel) -> Vec<f32> {
+    let only_e = |b: &BranchNets| BranchNets { d_g: None, d_p: None, d_gp: None, path: None, e: b.e.clone() };
+    flat_values(&MethodModel { diffuse: only_e(&model.diffuse), specular: only_e(&model.specular) })
+}
+
 /// A guided model may join a D_G trained wider than its D_P (`p_widths`): each column loads
 /// from a file of its own widths, a P file of the D_G's widths is refused by name, the joint
 /// stage trains the mixed model, and its weight file loads back with both widths.
