@@ -503,12 +503,18 @@ fn leaf_test_tri4<const ANY: bool, P: Probe>(
 ) -> bool {
     for blk in blocks {
         probe.block();
-        if let Some(h) = tri4_test(blk, r, *tmax) {
-            *tmax = h.0;
-            *best = Some(h);
-            if ANY {
-                return true;
-            }
+        let h = match tri4_fast(blk, r, *tmax) {
+            Tri4Result::Miss => continue,
+            Tri4Result::Hit(h) => h,
+            Tri4Result::EdgeZero => match tri4_scalar(blk, r, *tmax) {
+                Some(h) => h,
+                None => continue,
+            },
+        };
+        *tmax = h.0;
+        *best = Some(h);
+        if ANY {
+            return true;
         }
     }
     false
@@ -765,6 +771,29 @@ fn node_test(node: &Node, r: &RayData, tmax: f32) -> (u32, [f32; W]) {
 /// Exactly the floating-point operations of `triangle::intersect`, four lanes at a time.
 #[inline(always)]
 fn tri4_test(blk: &Tri4, r: &RayData, tmax: f32) -> Option<HitRec> {
+    match tri4_fast(blk, r, tmax) {
+        Tri4Result::Miss => None,
+        Tri4Result::Hit(h) => Some(h),
+        Tri4Result::EdgeZero => tri4_scalar(blk, r, tmax),
+    }
+}
+
+/// What the vector part of `tri4_test` found.
+enum Tri4Result {
+    Miss,
+    Hit(HitRec),
+    /// An edge function rounded to zero: the ray passes (numerically) through an edge or
+    /// vertex; the scalar test (`tri4_scalar`) resolves it exactly, consistently with the
+    /// neighbour.
+    EdgeZero,
+}
+
+/// `tri4_test` without its scalar fallback. Kept apart so that a caller handles the two
+/// outcomes on separate paths: merged with the out-of-line fallback's result (returned through
+/// memory), the hit record was assembled in memory by four scalar stores and reloaded at once
+/// by `*best = Some(h)`, a failed store-to-load forward on every leaf hit.
+#[inline(always)]
+fn tri4_fast(blk: &Tri4, r: &RayData, tmax: f32) -> Tri4Result {
     let [kx, ky, kz] = r.k;
     let [sx, sy, sz] = r.s;
     let sheared = |v: &[Vec4; 3]| {
@@ -779,9 +808,7 @@ fn tri4_test(blk: &Tri4, r: &RayData, tmax: f32) -> Option<HitRec> {
     let w = bx * ay - by * ax;
     let zero = Vec4::ZERO;
     if (u.cmpeq(zero) | v.cmpeq(zero) | w.cmpeq(zero)).any() {
-        // An edge function rounded to zero: the ray passes (numerically) through an edge or
-        // vertex; the scalar test resolves it exactly, consistently with the neighbour.
-        return tri4_scalar(blk, r, tmax);
+        return Tri4Result::EdgeZero;
     }
     let neg = u.cmplt(zero) | v.cmplt(zero) | w.cmplt(zero);
     let pos = u.cmpgt(zero) | v.cmpgt(zero) | w.cmpgt(zero);
@@ -801,7 +828,7 @@ fn tri4_test(blk: &Tri4, r: &RayData, tmax: f32) -> Option<HitRec> {
         & t.cmplt(tmax4);
     let mut m = ok.bitmask();
     if m == 0 {
-        return None;
+        return Tri4Result::Miss;
     }
     let ta = t.to_array();
     let mut lane = m.trailing_zeros() as usize;
@@ -814,7 +841,7 @@ fn tri4_test(blk: &Tri4, r: &RayData, tmax: f32) -> Option<HitRec> {
         }
     }
     let inv = 1.0 / det.to_array()[lane];
-    Some((ta[lane], blk.id[lane], v.to_array()[lane] * inv, w.to_array()[lane] * inv))
+    Tri4Result::Hit((ta[lane], blk.id[lane], v.to_array()[lane] * inv, w.to_array()[lane] * inv))
 }
 
 /// `tri4_test` one lane at a time through the scalar watertight test (which recomputes edge
