@@ -1,18 +1,40 @@
 #!/bin/bash
-# The half-size comparison models (preset `half`: 50 % of the default preset's channels), each
-# given the steps and rates of its default-size twin (the swap runs of 2026-11-25 afternoon:
-# g 2900 + 400 tone-mapped finetune, p 600 at 5e-4, guided 200; docs/denoiser.md), so the two
-# sizes differ only in width.
-# Deterministic from the seed; rerunning resumes from the checkpoints.
+# The half-size comparison models of issue 12: the shipped `edge-noise` U-Net columns at half
+# the channels of every level (`--widths 12,16,24,32,40` against 24,32,48,64,80), trained on the
+# campaign's dataset with the campaign's losses and rates (tools/campaign.sh) for fewer steps:
+#   g       3000 steps at 1e-3 (L1 + relative L2, relative to the input), then a tone-mapped
+#           finetune of 600 steps at 1e-4 (the shipped g's finetune, docs/denoiser.md);
+#   p        600 steps at 5e-4 (relative L1);
+#   guided   100 joint steps from them (lr 1e-5 for the columns and PathNets), where the
+#           campaign's guided and every later joint run had its best validation.
+# One run at a time, one thread each unless THREADS says otherwise. Deterministic from the seed;
+# rerunning resumes from the checkpoints.
 #
-# The half files shipped today are still the KPCN half models of 2026-11-23, made by this
-# script's earlier version (git log -p tools/train_half.sh); they are to be retrained with it.
-set -e
+#   tools/train_half.sh DATA OUT     # e.g. tools/train_half.sh /work/data/campaign /work/runs/half
+#
+# Environment: PIXGUIDE (the binary, a `--features tch` build for BACKEND=tch)
+# [target/release/pixguide], BACKEND [tch], THREADS [1].
+# The half files shipped until 2026-11-28 are the KPCN half models of 2026-11-23 (preset `half`),
+# made by this script's earlier version (git log -p tools/train_half.sh).
+set -euo pipefail
 cd "$(dirname "$0")/.."
 P=${PIXGUIDE:-target/release/pixguide}
-D=${1:-data/train-set}
-W=${2:-denoiser/weights}
-$P train --data $D --method g --preset half --branch-steps 2900 --finetune-steps 400 --seed 1 --resume -o $W/g-half.safetensors
-$P train --data $D --method p --preset half --lr-branches 5e-4 --branch-steps 600 --finetune-steps 0 --seed 1 --resume -o $W/p-half.safetensors
-$P train --data $D --method guided --preset half --from-g $W/g-half.safetensors --from-p $W/p-half.safetensors \
-  --joint-steps 200 --seed 1 --resume -o $W/guided-half.safetensors
+D=${1:?dataset folder}
+W=${2:?output folder}
+backend=${BACKEND:-tch}
+threads=${THREADS:-1}
+mkdir -p "$W"
+torch_lib=target/torch-venv/lib/python3.11/site-packages/torch/lib
+if [ "$backend" != flex ] && [ -d "$torch_lib" ] && [[ "${LD_LIBRARY_PATH:-}" != *torch* ]]; then
+    export LD_LIBRARY_PATH="$PWD/$torch_lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+fi
+export OMP_NUM_THREADS=$threads
+common=(--backend "$backend" --data "$D" --preset edge-noise --widths 12,16,24,32,40 --patch 96 --batch 2 --seed 1 --resume)
+inside=(--loss-scale relative-to-input --rel-l2-weight 1 --rel-l2-inside)
+run() { nice "$P" --threads "$threads" train "${common[@]}" "$@"; }
+run -o "$W/g-half.safetensors" --method g "${inside[@]}" --lr-branches 1e-3 --branch-steps 3000 \
+    --finetune-steps 600 --finetune-loss tonemapped --lr-finetune 1e-4 --val-every 200
+run -o "$W/p-half.safetensors" --method p --loss-scale relative-to-input --lr-branches 5e-4 \
+    --branch-steps 600 --finetune-steps 0 --val-every 100
+run -o "$W/guided-half.safetensors" --method guided "${inside[@]}" --from-g "$W/g-half.safetensors" \
+    --from-p "$W/p-half.safetensors" --joint-steps 100 --lr-joint-rest 1e-5 --val-every 50
