@@ -2,10 +2,12 @@
 //! sample, per-pixel statistics in f64, and the requested extra buffers.
 
 pub mod path;
+pub mod wave;
 
 use crate::film::descriptors::FIELDS;
 use crate::film::{BufferRequest, Descriptors, Frame, PixelBuffer, Welford};
 use crate::rng::Pcg32;
+use crate::math::Ray;
 use crate::scene::Scene;
 use crate::{Error, Result};
 use glam::{Vec2, Vec3};
@@ -120,6 +122,30 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
     let cam = &scene.camera;
     let to_camera = |n: Vec3| Vec3::new(n.dot(cam.right), n.dot(cam.up), -n.dot(cam.forward));
 
+    let use_wave = !req.gbuffers && !req.descriptors && wave::supported(scene);
+    let run_batch = |t: &mut TileResult, batch: &mut Vec<(usize, Ray, Pcg32)>| {
+        if batch.is_empty() {
+            return;
+        }
+        let rays: Vec<Ray> = batch.iter().map(|b| b.1).collect();
+        let mut rngs: Vec<Pcg32> = batch.iter().map(|b| b.2.clone()).collect();
+        let lanes = wave::trace_batch(scene, &rays, &mut rngs, opts.max_bounces, opts.russian_roulette);
+        for (&(li, _, _), r) in batch.iter().zip(lanes.iter()) {
+            let (mut radiance, mut diffuse) = (r.radiance, r.diffuse);
+            t.rays += r.rays as u64;
+            if !(radiance.is_finite() && diffuse.is_finite()) {
+                t.nonfinite += 1;
+                radiance = Vec3::ZERO;
+                diffuse = Vec3::ZERO;
+            }
+            push3(&mut t.radiance[li * 3..li * 3 + 3], radiance);
+            if req.split {
+                push3(&mut t.diffuse[li * 3..li * 3 + 3], diffuse);
+                push3(&mut t.specular[li * 3..li * 3 + 3], (radiance - diffuse).max(Vec3::ZERO));
+            }
+        }
+        batch.clear();
+    };
     let results: Vec<TileResult> = tiles
         .par_iter()
         .zip(slots)
@@ -140,6 +166,31 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
                 nonfinite: 0,
                 rays: 0,
             };
+            if use_wave {
+                // Batches of `wave::LANES` samples in the order of the loop below (pixel by
+                // pixel, sample by sample), so each pixel's statistics see the same sequence.
+                let mut batch: Vec<(usize, Ray, Pcg32)> = Vec::with_capacity(wave::LANES);
+                for ly in 0..th {
+                    for lx in 0..tw {
+                        let (px, py) = (x0 + tx + lx, y0 + ty + ly);
+                        let pixel = py as u64 * cw as u64 + px as u64;
+                        let li = (ly * tw + lx) as usize;
+                        for s in 0..opts.spp {
+                            let mut rng = Pcg32::for_sample(opts.seed, pixel, (opts.first_sample + s) as u64);
+                            let film = Vec2::new(px as f32, py as f32) + rng.next_2d();
+                            batch.push((li, cam.ray(film), rng));
+                            if batch.len() == wave::LANES {
+                                run_batch(&mut t, &mut batch);
+                            }
+                        }
+                    }
+                    if ly + 1 == th {
+                        run_batch(&mut t, &mut batch);
+                    }
+                    progress(done.fetch_add(tw as u64, Ordering::Relaxed) + tw as u64);
+                }
+                return t;
+            }
             for ly in 0..th {
                 for lx in 0..tw {
                     let (px, py) = (x0 + tx + lx, y0 + ty + ly);

@@ -61,3 +61,37 @@ impl TriangleLight {
         Some((wi, dist, pdf))
     }
 }
+
+/// `TriangleLight::connect` (the same operations) on the light's fields, with the verdict as a flag instead of an
+/// `Option` (so a loop over many connections has no early exit and can be vectorised); when the
+/// flag is false the other values are meaningless.
+#[inline(always)]
+pub(crate) fn connect_parts(
+    p: Vec3,
+    p_light: Vec3,
+    n_light: Vec3,
+    select_pmf: f32,
+    area: f32,
+    two_sided: bool,
+    max_emission: f32,
+) -> (bool, Vec3, f32, f32) {
+    let d = p_light - p;
+    let dist2 = d.length_squared();
+    // Closer than ~16 ulps of the coordinates is rounding noise, not a real distance.
+    let scale = p.abs().max_element().max(p_light.abs().max_element());
+    let min_dist2 = (1e-6 * scale).powi(2).max(1e-24);
+    let dist = dist2.sqrt();
+    let wi = d / dist;
+    let cos = n_light.dot(-wi);
+    let pdf = select_pmf * (dist2 / (area * cos.abs()));
+    let ratio = max_emission / pdf;
+    let ok = (dist2 > min_dist2)
+        & dist2.is_finite()
+        & (two_sided | (cos > 0.0))
+        & (cos.abs() >= MIN_COS_LIGHT)
+        & (pdf > 0.0)
+        & pdf.is_finite()
+        & ratio.is_finite()
+        & is_finite3(wi);
+    (ok, wi, dist, pdf)
+}

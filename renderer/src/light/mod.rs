@@ -21,7 +21,7 @@ mod tests;
 use crate::geometry::Mesh;
 use crate::material::Material;
 use crate::texture::Texture;
-use area::TriangleLight;
+pub(crate) use area::{connect_parts, TriangleLight};
 use distribution::Distribution1D;
 use environment::EnvLight;
 use glam::{Vec2, Vec3};
@@ -157,6 +157,25 @@ impl Lights {
         let p_light = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
         let (wi, dist, pdf) = light.connect(p, p_light, light.normal, pmf)?;
         Some(LightSample { wi, dist, radiance: light.emission, pdf, prim: Some(light.prim) })
+    }
+
+    /// True when only emissive triangles can be picked by `sample` (the environment is black or
+    /// there are no lights): what the wavefront integrator (`integrator::wave`) handles.
+    pub(crate) fn triangles_only(&self) -> bool {
+        self.env.is_black()
+    }
+
+    /// The light selection of `sample` for a scene whose lights are all triangles: the light
+    /// picked with `u_select` and its selection probability, or `None` where `sample` returns
+    /// `None` before looking at the light.
+    #[inline]
+    pub(crate) fn select_triangle(&self, u_select: f32) -> Option<(&TriangleLight, f32)> {
+        let i = self.select.as_ref()?.sample_index(u_select);
+        let pmf = self.select_pmf[i];
+        if !(pmf > 0.0) {
+            return None;
+        }
+        self.triangles.get(i).map(|t| (t, pmf))
     }
 
     /// Density (solid angle, selection included) with which `sample` from `p` would pick point

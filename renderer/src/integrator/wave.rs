@@ -1,0 +1,497 @@
+//! A wavefront form of `path::trace` for the common case: every material Lambertian (textured or
+//! not), lights only emissive triangles, radiance (and the diffuse split) only. `LANES` paths
+//! advance together bounce by bounce; their state is kept in structure-of-arrays form, and each
+//! bounce is three stages:
+//!
+//! 1. per path (scalar): the closest-hit query, surface geometry, emission found by the path,
+//!    the BSDF's albedo, the random numbers, the light selection and the concentric disk map
+//!    (whose `sincosf` stays libm's);
+//! 2. all lanes at once, branch-free: normal orientation, shading frame, the light point, the
+//!    connection, the BSDF value and densities, the MIS weight, the shadow ray, the BSDF sample,
+//!    the new throughput and the next ray. Written as loops over the lanes that LLVM
+//!    vectorises, compiled for AVX2 + FMA when the CPU has them (chosen at run time) and for
+//!    the SSE2 baseline otherwise;
+//! 3. per path (scalar): the shadow query, its contribution, Russian roulette.
+//!
+//! Every path performs exactly `path::trace`'s floating-point operations in its order, with its
+//! own random stream, so the images are bit-identical to `trace`'s (no FMA contraction: Rust
+//! never fuses a multiply and an add unless told to).
+
+use crate::light::connect_parts;
+use crate::material::{Bsdf, MaterialKind};
+use crate::math::{is_finite3, Frame, Ray, INV_PI};
+use crate::rng::Pcg32;
+use crate::scene::Scene;
+use glam::{Vec2, Vec3};
+
+/// Paths per batch.
+pub const LANES: usize = 16;
+
+/// Fraction of the light distance kept for shadow rays (`path::SHADOW_EPS`).
+const SHADOW_EPS: f32 = 1e-4;
+
+/// Whether `trace_batch` can render `scene` (the radiance and diffuse buffers only).
+pub fn supported(scene: &Scene) -> bool {
+    scene.lights.triangles_only() && scene.materials.iter().all(|m| matches!(m.kind, MaterialKind::Lambert { .. }))
+}
+
+/// What one path of a batch produced.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct LaneResult {
+    pub radiance: Vec3,
+    pub diffuse: Vec3,
+    pub rays: u32,
+}
+
+type L = [f32; LANES];
+type B = [bool; LANES];
+
+#[derive(Clone, Copy)]
+struct V3 {
+    x: L,
+    y: L,
+    z: L,
+}
+
+impl V3 {
+    #[inline(always)]
+    fn get(&self, i: usize) -> Vec3 {
+        Vec3::new(self.x[i], self.y[i], self.z[i])
+    }
+    #[inline(always)]
+    fn set(&mut self, i: usize, v: Vec3) {
+        self.x[i] = v.x;
+        self.y[i] = v.y;
+        self.z[i] = v.z;
+    }
+}
+
+/// The batch: path state, and what the stages hand each other.
+struct Wave {
+    // Path state.
+    alive: B,
+    split_started: B,
+    prev_delta: B,
+    prev_pdf: L,
+    prev_p: V3,
+    org: V3,
+    dir: V3,
+    beta_d: V3,
+    beta_s: V3,
+    l_d: V3,
+    l_s: V3,
+    // Stage 1 → 2.
+    p: V3,
+    ng: V3,
+    ns: V3,
+    albedo: V3,
+    u_light: [Vec2; LANES],
+    disk: [Vec2; LANES],
+    has_light: B,
+    lp0: V3,
+    lp1: V3,
+    lp2: V3,
+    ln: V3,
+    l_area: L,
+    l_two_sided: B,
+    l_max: L,
+    l_pmf: L,
+    l_emission: V3,
+    // Stage 2 → 3.
+    shadow: B,
+    sh_org: V3,
+    sh_dir: V3,
+    sh_tmax: L,
+    add_d: V3,
+    add_s: V3,
+    cont: B,
+}
+
+/// Traces `rays.len()` (at most `LANES`) camera rays with their random streams, as
+/// `path::trace` would one by one with a radiance-only request.
+pub fn trace_batch(scene: &Scene, rays: &[Ray], rngs: &mut [Pcg32], max_bounces: u32, russian_roulette: bool) -> [LaneResult; LANES] {
+    assert!(rays.len() <= LANES && rays.len() == rngs.len());
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU has AVX2 and FMA (checked just above).
+        return unsafe { trace_batch_avx2(scene, rays, rngs, max_bounces, russian_roulette) };
+    }
+    trace_batch_impl(scene, rays, rngs, max_bounces, russian_roulette)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn trace_batch_avx2(scene: &Scene, rays: &[Ray], rngs: &mut [Pcg32], max_bounces: u32, rr: bool) -> [LaneResult; LANES] {
+    trace_batch_impl(scene, rays, rngs, max_bounces, rr)
+}
+
+#[inline(always)]
+fn trace_batch_impl(scene: &Scene, rays: &[Ray], rngs: &mut [Pcg32], max_bounces: u32, rr: bool) -> [LaneResult; LANES] {
+    let n = rays.len();
+    // SAFETY: every field is a plain array of f32, bool or Vec2, for which all-zero is valid.
+    let mut w: Wave = unsafe { std::mem::zeroed() };
+    let mut out = [LaneResult::default(); LANES];
+    for (i, r) in rays.iter().enumerate() {
+        w.alive[i] = true;
+        w.prev_delta[i] = true;
+        w.org.set(i, r.origin);
+        w.dir.set(i, r.dir);
+        w.prev_p.set(i, r.origin);
+        w.beta_s.set(i, Vec3::ONE);
+    }
+    for depth in 0..=max_bounces {
+        if !w.alive.iter().any(|&a| a) {
+            break;
+        }
+        stage_hit(scene, &mut w, rngs, &mut out, depth, max_bounces, n);
+        stage_shade(&mut w);
+        stage_shadow(scene, &mut w, rngs, &mut out, depth, rr, n);
+    }
+    for (i, o) in out.iter_mut().enumerate().take(n) {
+        let (l_d, l_s) = (w.l_d.get(i), w.l_s.get(i));
+        o.radiance = l_d + l_s;
+        o.diffuse = l_d;
+    }
+    out
+}
+
+/// Stage 1, path by path: `path::trace` from the closest-hit query to the light selection.
+#[inline(always)]
+fn stage_hit(scene: &Scene, w: &mut Wave, rngs: &mut [Pcg32], out: &mut [LaneResult; LANES], depth: u32, max_bounces: u32, n: usize) {
+    for i in 0..n {
+        w.has_light[i] = false;
+        if !w.alive[i] {
+            continue;
+        }
+        let rng = &mut rngs[i];
+        let ray = Ray::new(w.org.get(i), w.dir.get(i));
+        let (beta_d, beta_s) = (w.beta_d.get(i), w.beta_s.get(i));
+        out[i].rays += 1;
+        let Some(hit) = scene.accel.intersect(&ray, f32::INFINITY) else {
+            let le = scene.lights.env_radiance(ray.dir);
+            if le.max_element() > 0.0 {
+                let wgt = if depth == 0 || w.prev_delta[i] {
+                    1.0
+                } else {
+                    power_heuristic(w.prev_pdf[i], scene.lights.env_pdf(ray.dir))
+                };
+                w.l_d.set(i, w.l_d.get(i) + beta_d * le * wgt);
+                w.l_s.set(i, w.l_s.get(i) + beta_s * le * wgt);
+            }
+            w.alive[i] = false;
+            continue;
+        };
+        let si = scene.surface(&ray, &hit);
+        let material = &scene.materials[si.material as usize];
+        let wo_world = -ray.dir;
+        if material.is_emissive() {
+            let le = material.emitted(si.ng, wo_world);
+            if le.max_element() > 0.0 {
+                let wgt = if depth == 0 || w.prev_delta[i] {
+                    1.0
+                } else {
+                    power_heuristic(w.prev_pdf[i], scene.lights.pdf_triangle(si.prim, w.prev_p.get(i), si.p, si.ng))
+                };
+                w.l_d.set(i, w.l_d.get(i) + beta_d * le * wgt);
+                w.l_s.set(i, w.l_s.get(i) + beta_s * le * wgt);
+            }
+        }
+        if depth == max_bounces {
+            w.alive[i] = false;
+            continue;
+        }
+        let Bsdf::Lambert { albedo } = material.bsdf(si.uv, &scene.textures) else {
+            unreachable!("wave::supported admits Lambertian materials only")
+        };
+        // `Bsdf::resolved`.
+        let albedo = if is_finite3(albedo) { albedo.max(Vec3::ZERO) } else { Vec3::ZERO }.min(Vec3::ONE);
+        if material.one_sided && wo_world.dot(si.ng) < 0.0 {
+            w.alive[i] = false;
+            continue;
+        }
+        w.p.set(i, si.p);
+        w.ng.set(i, si.ng);
+        w.ns.set(i, si.ns);
+        w.albedo.set(i, albedo);
+
+        let u_select = rng.next_f32();
+        w.u_light[i] = rng.next_2d();
+        let _u_lobe = rng.next_f32();
+        let u_bsdf = rng.next_2d();
+        // `Bsdf::sample`'s input checks: the draws are always finite, so only `wo` is left (stage 2).
+        w.disk[i] = crate::sampling::square_to_disk_concentric(u_bsdf);
+        if let Some((light, pmf)) = scene.lights.select_triangle(u_select) {
+            w.has_light[i] = true;
+            w.lp0.set(i, light.vertices[0]);
+            w.lp1.set(i, light.vertices[1]);
+            w.lp2.set(i, light.vertices[2]);
+            w.ln.set(i, light.normal);
+            w.l_area[i] = light.area;
+            w.l_two_sided[i] = light.two_sided;
+            w.l_max[i] = light.max_emission;
+            w.l_pmf[i] = pmf;
+            w.l_emission.set(i, light.emission);
+        }
+    }
+}
+
+/// Stage 2, every lane at once and branch-free: the rest of the bounce but the shadow query.
+/// Lanes that are not alive compute garbage that nothing reads.
+#[inline(always)]
+fn stage_shade(w: &mut Wave) {
+    for i in 0..LANES {
+        let alive = w.alive[i];
+        let p = w.p.get(i);
+        let ng0 = w.ng.get(i);
+        let wo_world = -w.dir.get(i);
+        let albedo = w.albedo.get(i);
+        let (beta_d, beta_s) = (w.beta_d.get(i), w.beta_s.get(i));
+        let first_diffuse = !w.split_started[i];
+
+        // Lambert is reflection-only: both normals towards the viewer, as in `trace`.
+        let flip = wo_world.dot(ng0) < 0.0;
+        let ng = if flip { -ng0 } else { ng0 };
+        let ns = if flip { -w.ns.get(i) } else { w.ns.get(i) };
+        let ns = if wo_world.dot(ns) * wo_world.dot(ng) <= 0.0 { ng } else { ns };
+        let frame = frame_from_normal(ns);
+        let wo = to_local(&frame, wo_world);
+        let wo_ok = is_finite3(wo);
+
+        // Next-event estimation (`Lights::sample`, `Bsdf::eval_split`, `Bsdf::pdf`).
+        let b = square_to_triangle(w.u_light[i]);
+        let (p0, p1, p2) = (w.lp0.get(i), w.lp1.get(i), w.lp2.get(i));
+        let p_light = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
+        let (conn, l_wi, l_dist, l_pdf) = connect_parts(p, p_light, w.ln.get(i), w.l_pmf[i], w.l_area[i], w.l_two_sided[i], w.l_max[i]);
+        let wi = to_local(&frame, l_wi);
+        let same_side = (l_wi.dot(ng) > 0.0) == (wo_world.dot(ng) > 0.0);
+        let eval_ok = wo_ok & is_finite3(wi) & (wo.z > 0.0) & (wi.z > 0.0);
+        let f_d = if eval_ok { albedo * (wi.z * INV_PI) } else { Vec3::ZERO };
+        let f_d = if is_finite3(f_d) { f_d.max(Vec3::ZERO) } else { Vec3::ZERO };
+        let f_o = Vec3::ZERO;
+        let (f_d, f_o) = if same_side { (f_d, f_o) } else { (Vec3::ZERO, Vec3::ZERO) };
+        let f_total = f_d + f_o;
+        let shadow = alive & w.has_light[i] & conn & (f_total.max_element() > 0.0);
+        let origin = offset_ray_origin(p, ng0, l_wi);
+        let tmax = if l_dist.is_finite() { (p + l_wi * l_dist - origin).length() * (1.0 - SHADOW_EPS) } else { f32::INFINITY };
+        let pdf_b = if eval_ok { wi.z * INV_PI } else { 0.0 };
+        let pdf_b = if pdf_b.is_finite() && pdf_b > 0.0 { pdf_b } else { 0.0 };
+        let mis = power_heuristic(l_pdf, pdf_b);
+        let c = w.l_emission.get(i) * (mis / l_pdf);
+        let (add_d, add_s) = if first_diffuse {
+            (beta_s * f_d * c, beta_s * f_o * c)
+        } else {
+            let fc = f_total * c;
+            (beta_d * fc, beta_s * fc)
+        };
+        w.shadow[i] = shadow;
+        w.sh_org.set(i, origin);
+        w.sh_dir.set(i, l_wi);
+        w.sh_tmax[i] = tmax;
+        w.add_d.set(i, add_d);
+        w.add_s.set(i, add_s);
+
+        // BSDF sampling (`Bsdf::sample` → `lambert::sample`), then `trace`'s checks.
+        let d = w.disk[i];
+        let s_wi = Vec3::new(d.x, d.y, (1.0 - d.length_squared()).max(0.0).sqrt());
+        let s_pdf = s_wi.z * INV_PI;
+        let s_weight = albedo;
+        let s_fcos = albedo * s_pdf;
+        let sampled = wo_ok
+            & (wo.z > 0.0)
+            & (s_wi.z > 0.0)
+            & (s_pdf > 0.0)
+            & s_pdf.is_finite()
+            & is_finite3(s_weight)
+            & is_finite3(s_fcos)
+            & is_finite3(s_wi)
+            & (s_weight.min_element() >= 0.0)
+            & (s_fcos.min_element() >= 0.0)
+            & (s_wi != Vec3::ZERO);
+        let wi_world = to_world(&frame, s_wi);
+        let reflected = wi_world.dot(ng) > 0.0;
+        let wo_above = wo_world.dot(ng) > 0.0;
+        let ok = sampled & (s_weight.max_element() > 0.0) & (reflected == wo_above);
+        let (nbeta_d, nbeta_s) = if first_diffuse {
+            // `Bsdf::eval_split(wo, s.wi)` of the sampled (diffuse) lobe.
+            let e_ok = is_finite3(s_wi) & (wo.z > 0.0) & (s_wi.z > 0.0);
+            let e_d = if e_ok { albedo * (s_wi.z * INV_PI) } else { Vec3::ZERO };
+            let e_d = if is_finite3(e_d) { e_d.max(Vec3::ZERO) } else { Vec3::ZERO };
+            (beta_s * e_d / s_pdf, beta_s * (Vec3::ZERO / s_pdf))
+        } else {
+            (beta_d * s_weight, beta_s * s_weight)
+        };
+        let ok = ok & is_finite3(nbeta_d + nbeta_s);
+        let cont = alive & ok;
+        w.cont[i] = cont;
+        // Selects rather than a branch, so that the loop stays vectorisable.
+        let next_org = offset_ray_origin(p, ng0, wi_world);
+        w.beta_d.set(i, if cont { nbeta_d } else { beta_d });
+        w.beta_s.set(i, if cont { nbeta_s } else { beta_s });
+        w.split_started[i] |= cont;
+        w.prev_pdf[i] = if cont { s_pdf } else { w.prev_pdf[i] };
+        w.prev_delta[i] &= !cont;
+        w.prev_p.set(i, if cont { p } else { w.prev_p.get(i) });
+        w.org.set(i, if cont { next_org } else { w.org.get(i) });
+        w.dir.set(i, if cont { wi_world } else { -wo_world });
+    }
+}
+
+/// Stage 3, path by path: shadow rays, their contributions, Russian roulette.
+#[inline(always)]
+fn stage_shadow(scene: &Scene, w: &mut Wave, rngs: &mut [Pcg32], out: &mut [LaneResult; LANES], depth: u32, rr: bool, n: usize) {
+    for i in 0..n {
+        if w.shadow[i] {
+            out[i].rays += 1;
+            if !scene.accel.occluded(&Ray::new(w.sh_org.get(i), w.sh_dir.get(i)), w.sh_tmax[i]) {
+                w.l_d.set(i, w.l_d.get(i) + w.add_d.get(i));
+                w.l_s.set(i, w.l_s.get(i) + w.add_s.get(i));
+            }
+        }
+        if !w.alive[i] {
+            continue;
+        }
+        if !w.cont[i] {
+            w.alive[i] = false;
+            continue;
+        }
+        if rr && depth >= 3 {
+            let (bd, bs) = (w.beta_d.get(i), w.beta_s.get(i));
+            let q = (1.0 - (bd + bs).max_element()).clamp(0.05, 0.95);
+            if rngs[i].next_f32() < q {
+                w.alive[i] = false;
+                continue;
+            }
+            let k = Vec3::splat(1.0 / (1.0 - q));
+            w.beta_d.set(i, bd * k);
+            w.beta_s.set(i, bs * k);
+        }
+    }
+}
+
+// Inlined copies of small helpers (the same operations), so that the lane loops hold no calls.
+
+#[inline(always)]
+fn frame_from_normal(n: Vec3) -> Frame {
+    let sign = 1.0f32.copysign(n.z);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    let s = Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+    let t = Vec3::new(b, sign + n.y * n.y * a, -n.y);
+    Frame { s, t, n }
+}
+
+#[inline(always)]
+fn to_local(f: &Frame, v: Vec3) -> Vec3 {
+    Vec3::new(v.dot(f.s), v.dot(f.t), v.dot(f.n))
+}
+
+#[inline(always)]
+fn to_world(f: &Frame, v: Vec3) -> Vec3 {
+    f.s * v.x + f.t * v.y + f.n * v.z
+}
+
+#[inline(always)]
+fn square_to_triangle(u: Vec2) -> Vec2 {
+    let (mut b0, mut b1);
+    if u.x < u.y {
+        b0 = u.x / 2.0;
+        b1 = u.y - b0;
+    } else {
+        b1 = u.y / 2.0;
+        b0 = u.x - b1;
+    }
+    b0 = b0.clamp(0.0, 1.0);
+    b1 = b1.clamp(0.0, 1.0);
+    Vec2::new(b1, 1.0 - b0 - b1).max(Vec2::ZERO)
+}
+
+#[inline(always)]
+fn power_heuristic(pdf_a: f32, pdf_b: f32) -> f32 {
+    let a = pdf_a * pdf_a;
+    let b = pdf_b * pdf_b;
+    let r = a / (a + b);
+    let r = if !a.is_finite() { 1.0 } else { r };
+    let r = if !b.is_finite() { 0.0 } else { r };
+    if a == 0.0 {
+        0.0
+    } else {
+        r
+    }
+}
+
+#[inline(always)]
+fn offset_ray_origin(p: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
+    crate::geometry::offset_ray_origin(p, ng, dir)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::film::BufferRequest;
+    use crate::integrator::{path, render, RenderOptions};
+    use std::path::Path;
+
+    fn load(rel: &str) -> Scene {
+        Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)).unwrap()
+    }
+
+    /// Every lane of a batch equals `path::trace` of the same camera ray and stream, bit for bit.
+    fn check_against_trace(scene: &Scene, rr: bool) {
+        assert!(supported(scene));
+        let cam = &scene.camera;
+        let (w, h) = (cam.width, cam.height);
+        let mut checked = 0;
+        for k in 0..40u64 {
+            // Batches of every length from 1 to LANES.
+            let len = 1 + (k as usize % LANES);
+            let mut rays = Vec::new();
+            let mut rngs = Vec::new();
+            let mut reference = Vec::new();
+            for j in 0..len as u64 {
+                let pixel = (k * 7919 + j * 104_729) % (w as u64 * h as u64);
+                let mut rng = Pcg32::for_sample(3, pixel, j);
+                let film = Vec2::new((pixel % w as u64) as f32, (pixel / w as u64) as f32) + rng.next_2d();
+                let ray = cam.ray(film);
+                let mut r2 = rng.clone();
+                reference.push(path::trace(scene, ray, &mut r2, 5, rr, BufferRequest::RADIANCE_ONLY));
+                rays.push(ray);
+                rngs.push(rng);
+            }
+            let got = trace_batch(scene, &rays, &mut rngs, 5, rr);
+            for (g, r) in got.iter().zip(&reference) {
+                assert_eq!(g.radiance.to_array().map(f32::to_bits), r.radiance.to_array().map(f32::to_bits));
+                assert_eq!(g.diffuse.to_array().map(f32::to_bits), r.diffuse.to_array().map(f32::to_bits));
+                assert_eq!(g.rays, r.rays);
+                checked += 1;
+            }
+        }
+        assert!(checked > 300);
+    }
+
+    #[test]
+    fn batches_equal_trace_bit_for_bit() {
+        for scene in ["scenes/cornell-box/scene.toml", "scenes/cornell-bunny/scene.toml"] {
+            let s = load(scene);
+            check_against_trace(&s, false);
+            check_against_trace(&s, true);
+        }
+    }
+
+    /// A render through the wavefront (radiance and split only) and one through `path::trace`
+    /// (G-buffers requested) give the same radiance and diffuse buffers.
+    #[test]
+    fn wavefront_render_equals_scalar_render() {
+        let s = load("scenes/cornell-box/scene.toml");
+        let mut opts = RenderOptions::from_scene(&s, BufferRequest { split: true, gbuffers: false, descriptors: false });
+        opts.spp = 5;
+        opts.crop = Some((40, 30, 37, 21));
+        let (a, _) = render(&s, &opts, &|_| {}).unwrap();
+        opts.request.gbuffers = true;
+        let (b, _) = render(&s, &opts, &|_| {}).unwrap();
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&a.radiance.mean), bits(&b.radiance.mean));
+        assert_eq!(bits(&a.radiance.var), bits(&b.radiance.var));
+        let (da, db) = (a.diffuse.unwrap(), b.diffuse.unwrap());
+        assert_eq!(bits(&da.mean), bits(&db.mean));
+    }
+}
