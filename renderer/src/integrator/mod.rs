@@ -6,8 +6,8 @@ pub mod wave;
 
 use crate::film::descriptors::FIELDS;
 use crate::film::{BufferRequest, Descriptors, Frame, PixelBuffer, Welford};
-use crate::rng::Pcg32;
 use crate::math::Ray;
+use crate::rng::Pcg32;
 use crate::scene::Scene;
 use crate::{Error, Result};
 use glam::{Vec2, Vec3};
@@ -123,14 +123,12 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
     let to_camera = |n: Vec3| Vec3::new(n.dot(cam.right), n.dot(cam.up), -n.dot(cam.forward));
 
     let use_wave = !req.gbuffers && !req.descriptors && wave::supported(scene);
-    let run_batch = |t: &mut TileResult, batch: &mut Vec<(usize, Ray, Pcg32)>| {
-        if batch.is_empty() {
+    let run_batch = |t: &mut TileResult, batch: &mut Batch| {
+        if batch.pixel.is_empty() {
             return;
         }
-        let rays: Vec<Ray> = batch.iter().map(|b| b.1).collect();
-        let mut rngs: Vec<Pcg32> = batch.iter().map(|b| b.2.clone()).collect();
-        let lanes = wave::trace_batch(scene, &rays, &mut rngs, opts.max_bounces, opts.russian_roulette);
-        for (&(li, _, _), r) in batch.iter().zip(lanes.iter()) {
+        let lanes = wave::trace_batch(scene, &batch.ray, &mut batch.rng, opts.max_bounces, opts.russian_roulette);
+        for (&li, r) in batch.pixel.iter().zip(lanes.iter()) {
             let (mut radiance, mut diffuse) = (r.radiance, r.diffuse);
             t.rays += r.rays as u64;
             if !(radiance.is_finite() && diffuse.is_finite()) {
@@ -144,7 +142,9 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
                 push3(&mut t.specular[li * 3..li * 3 + 3], (radiance - diffuse).max(Vec3::ZERO));
             }
         }
-        batch.clear();
+        batch.pixel.clear();
+        batch.ray.clear();
+        batch.rng.clear();
     };
     let results: Vec<TileResult> = tiles
         .par_iter()
@@ -169,7 +169,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
             if use_wave {
                 // Batches of `wave::LANES` samples in the order of the loop below (pixel by
                 // pixel, sample by sample), so each pixel's statistics see the same sequence.
-                let mut batch: Vec<(usize, Ray, Pcg32)> = Vec::with_capacity(wave::LANES);
+                let mut batch = Batch::default();
                 for ly in 0..th {
                     for lx in 0..tw {
                         let (px, py) = (x0 + tx + lx, y0 + ty + ly);
@@ -178,8 +178,10 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
                         for s in 0..opts.spp {
                             let mut rng = Pcg32::for_sample(opts.seed, pixel, (opts.first_sample + s) as u64);
                             let film = Vec2::new(px as f32, py as f32) + rng.next_2d();
-                            batch.push((li, cam.ray(film), rng));
-                            if batch.len() == wave::LANES {
+                            batch.pixel.push(li);
+                            batch.ray.push(cam.ray(film));
+                            batch.rng.push(rng);
+                            if batch.pixel.len() == wave::LANES {
                                 run_batch(&mut t, &mut batch);
                             }
                         }
@@ -273,6 +275,14 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
     }
     let stats = RenderStats { wall: start.elapsed(), samples: pixels as u64 * opts.spp as u64, rays };
     Ok((frame, stats))
+}
+
+/// Samples waiting for `wave::trace_batch`: their pixel in the tile, camera ray and stream.
+#[derive(Default)]
+struct Batch {
+    pixel: Vec<usize>,
+    ray: Vec<Ray>,
+    rng: Vec<Pcg32>,
 }
 
 fn push3(acc: &mut [Welford], v: Vec3) {

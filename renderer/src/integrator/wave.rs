@@ -76,6 +76,9 @@ struct Wave {
     prev_p: V3,
     org: V3,
     dir: V3,
+    /// `org` and `dir` as rays, written one stage before the queries read them: a ray put
+    /// together from the lanes right before a query is reloaded with a failed store forward.
+    ray: [Ray; LANES],
     beta_d: V3,
     beta_s: V3,
     l_d: V3,
@@ -102,6 +105,7 @@ struct Wave {
     sh_org: V3,
     sh_dir: V3,
     sh_tmax: L,
+    sh_ray: [Ray; LANES],
     add_d: V3,
     add_s: V3,
     cont: B,
@@ -128,7 +132,7 @@ unsafe fn trace_batch_avx2(scene: &Scene, rays: &[Ray], rngs: &mut [Pcg32], max_
 #[inline(always)]
 fn trace_batch_impl(scene: &Scene, rays: &[Ray], rngs: &mut [Pcg32], max_bounces: u32, rr: bool) -> [LaneResult; LANES] {
     let n = rays.len();
-    // SAFETY: every field is a plain array of f32, bool or Vec2, for which all-zero is valid.
+    // SAFETY: every field is a plain array of f32, bool, Vec2 or Ray, for which all-zero is valid.
     let mut w: Wave = unsafe { std::mem::zeroed() };
     let mut out = [LaneResult::default(); LANES];
     for (i, r) in rays.iter().enumerate() {
@@ -136,6 +140,7 @@ fn trace_batch_impl(scene: &Scene, rays: &[Ray], rngs: &mut [Pcg32], max_bounces
         w.prev_delta[i] = true;
         w.org.set(i, r.origin);
         w.dir.set(i, r.dir);
+        w.ray[i] = *r;
         w.prev_p.set(i, r.origin);
         w.beta_s.set(i, Vec3::ONE);
     }
@@ -164,24 +169,20 @@ fn stage_hit(scene: &Scene, w: &mut Wave, rngs: &mut [Pcg32], out: &mut [LaneRes
             continue;
         }
         let rng = &mut rngs[i];
-        let ray = Ray::new(w.org.get(i), w.dir.get(i));
+        let ray = w.ray[i];
         let (beta_d, beta_s) = (w.beta_d.get(i), w.beta_s.get(i));
         out[i].rays += 1;
         let Some(hit) = scene.accel.intersect(&ray, f32::INFINITY) else {
             let le = scene.lights.env_radiance(ray.dir);
             if le.max_element() > 0.0 {
-                let wgt = if depth == 0 || w.prev_delta[i] {
-                    1.0
-                } else {
-                    power_heuristic(w.prev_pdf[i], scene.lights.env_pdf(ray.dir))
-                };
+                let wgt = if depth == 0 || w.prev_delta[i] { 1.0 } else { power_heuristic(w.prev_pdf[i], scene.lights.env_pdf(ray.dir)) };
                 w.l_d.set(i, w.l_d.get(i) + beta_d * le * wgt);
                 w.l_s.set(i, w.l_s.get(i) + beta_s * le * wgt);
             }
             w.alive[i] = false;
             continue;
         };
-        let si = scene.surface(&ray, &hit);
+        let si = scene.surface_inline(&ray, &hit);
         let material = &scene.materials[si.material as usize];
         let wo_world = -ray.dir;
         if material.is_emissive() {
@@ -339,14 +340,22 @@ fn stage_shade(w: &mut Wave) {
 /// Stage 3, path by path: shadow rays, their contributions, Russian roulette.
 #[inline(always)]
 fn stage_shadow(scene: &Scene, w: &mut Wave, rngs: &mut [Pcg32], out: &mut [LaneResult; LANES], depth: u32, rr: bool, n: usize) {
+    if n > 0 {
+        w.sh_ray[0] = Ray::new(w.sh_org.get(0), w.sh_dir.get(0));
+    }
     for i in 0..n {
+        // The next lane's shadow ray, one query ahead (see `Wave::ray`).
+        if i + 1 < n {
+            w.sh_ray[i + 1] = Ray::new(w.sh_org.get(i + 1), w.sh_dir.get(i + 1));
+        }
         if w.shadow[i] {
             out[i].rays += 1;
-            if !scene.accel.occluded(&Ray::new(w.sh_org.get(i), w.sh_dir.get(i)), w.sh_tmax[i]) {
+            if !scene.accel.occluded(&w.sh_ray[i], w.sh_tmax[i]) {
                 w.l_d.set(i, w.l_d.get(i) + w.add_d.get(i));
                 w.l_s.set(i, w.l_s.get(i) + w.add_s.get(i));
             }
         }
+        w.ray[i] = Ray::new(w.org.get(i), w.dir.get(i));
         if !w.alive[i] {
             continue;
         }
@@ -419,9 +428,43 @@ fn power_heuristic(pdf_a: f32, pdf_b: f32) -> f32 {
     }
 }
 
+/// `geometry::offset_ray_origin` with one change that keeps its results: the integer step
+/// count `(256·n_i) as i32` is converted without saturation, on values made to lie in i32's
+/// range first (|n_i| ≤ 1 for the unit normals here, so nothing is ever replaced). Vectorised,
+/// the saturating conversion costs a compare-and-blend sequence per component (3% of the
+/// render); this is one `cvttps2dq`.
 #[inline(always)]
 fn offset_ray_origin(p: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
-    crate::geometry::offset_ray_origin(p, ng, dir)
+    const INT_SCALE: f32 = 256.0;
+    const ORIGIN_FRACTION: f32 = 1.0 / 32.0;
+    const FLOAT_SCALE: f32 = 1.0 / 65536.0;
+    const MIN_MAGNITUDE: f32 = 1e-8;
+    let n = if ng.dot(dir) < 0.0 { -ng } else { ng };
+    let mag = p.abs().max_element().max(MIN_MAGNITUDE);
+    let near_zero = mag * ORIGIN_FRACTION;
+    let float_step = FLOAT_SCALE * mag;
+    let component = |pi: f32, ni: f32| {
+        let by_float = pi + float_step * ni;
+        let scaled = INT_SCALE * ni;
+        // In range for the conversion (NaN included: it fails the comparison).
+        let scaled = if scaled.abs() < 1.0e9 { scaled } else { 0.0 };
+        // SAFETY: `scaled` is finite and |scaled| < 1e9 < 2^31.
+        let steps: i32 = unsafe { scaled.to_int_unchecked() };
+        let steps = if pi < 0.0 { steps.wrapping_neg() } else { steps };
+        let stepped = f32::from_bits((pi.to_bits() as i32).wrapping_add(steps) as u32);
+        let by_ulps = if stepped.is_finite() { stepped } else { pi };
+        if pi.abs() < near_zero {
+            by_float
+        } else {
+            by_ulps
+        }
+    };
+    let out = Vec3::new(component(p.x, n.x), component(p.y, n.y), component(p.z, n.z));
+    if !p.is_finite() || !ng.is_finite() {
+        p
+    } else {
+        out
+    }
 }
 
 #[cfg(test)]

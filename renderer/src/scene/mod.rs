@@ -126,6 +126,12 @@ impl Scene {
     /// Surface geometry of a hit returned by `accel.intersect(ray, ..)`.
     #[inline]
     pub fn surface(&self, ray: &Ray, hit: &Hit) -> SurfaceHit {
+        self.surface_inline(ray, hit)
+    }
+
+    /// `surface`, always inlined (the wavefront's hit stage).
+    #[inline(always)]
+    pub(crate) fn surface_inline(&self, ray: &Ray, hit: &Hit) -> SurfaceHit {
         let i = hit.prim as usize;
         let [a, b, c] = self.mesh.triangles[i];
         let (a, b, c) = (a as usize, b as usize, c as usize);
