@@ -25,7 +25,7 @@ use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 
 /// Paths per batch.
-pub const LANES: usize = 16;
+pub const LANES: usize = 32;
 
 /// Fraction of the light distance kept for shadow rays (`path::SHADOW_EPS`).
 const SHADOW_EPS: f32 = 1e-4;
