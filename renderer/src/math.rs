@@ -31,6 +31,8 @@ pub struct Frame {
 }
 
 impl Frame {
+    // Always inlined: the wavefront's vectorised lane loops (integrator/wave.rs) must hold no calls.
+    #[inline(always)]
     pub fn from_normal(n: Vec3) -> Self {
         let sign = 1.0f32.copysign(n.z);
         let a = -1.0 / (sign + n.z);
@@ -39,9 +41,11 @@ impl Frame {
         let t = Vec3::new(b, sign + n.y * n.y * a, -n.y);
         Frame { s, t, n }
     }
+    #[inline(always)]
     pub fn to_local(&self, v: Vec3) -> Vec3 {
         Vec3::new(v.dot(self.s), v.dot(self.t), v.dot(self.n))
     }
+    #[inline(always)]
     pub fn to_world(&self, v: Vec3) -> Vec3 {
         self.s * v.x + self.t * v.y + self.n * v.z
     }

@@ -35,6 +35,8 @@ pub fn square_to_uniform_sphere(u: Vec2) -> Vec3 {
 pub const UNIFORM_SPHERE_PDF: f32 = 1.0 / (4.0 * PI);
 
 /// Uniform point on a triangle as barycentrics (b1, b2) (Heitz 2019's low-distortion map).
+// Always inlined: the wavefront's vectorised lane loops (integrator/wave.rs) must hold no calls.
+#[inline(always)]
 pub fn square_to_triangle(u: Vec2) -> Vec2 {
     let (mut b0, mut b1);
     if u.x < u.y {

@@ -254,16 +254,16 @@ fn stage_shade(w: &mut Wave) {
         let ng = if flip { -ng0 } else { ng0 };
         let ns = if flip { -w.ns.get(i) } else { w.ns.get(i) };
         let ns = if wo_world.dot(ns) * wo_world.dot(ng) <= 0.0 { ng } else { ns };
-        let frame = frame_from_normal(ns);
-        let wo = to_local(&frame, wo_world);
+        let frame = Frame::from_normal(ns);
+        let wo = frame.to_local(wo_world);
         let wo_ok = is_finite3(wo);
 
         // Next-event estimation (`Lights::sample`, `Bsdf::eval_split`, `Bsdf::pdf`).
-        let b = square_to_triangle(w.u_light[i]);
+        let b = crate::sampling::square_to_triangle(w.u_light[i]);
         let (p0, p1, p2) = (w.lp0.get(i), w.lp1.get(i), w.lp2.get(i));
         let p_light = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
         let (conn, l_wi, l_dist, l_pdf) = connect_parts(p, p_light, w.ln.get(i), w.l_pmf[i], w.l_area[i], w.l_two_sided[i], w.l_max[i]);
-        let wi = to_local(&frame, l_wi);
+        let wi = frame.to_local(l_wi);
         let same_side = (l_wi.dot(ng) > 0.0) == (wo_world.dot(ng) > 0.0);
         let eval_ok = wo_ok & is_finite3(wi) & (wo.z > 0.0) & (wi.z > 0.0);
         let f_d = if eval_ok { albedo * (wi.z * INV_PI) } else { Vec3::ZERO };
@@ -308,7 +308,7 @@ fn stage_shade(w: &mut Wave) {
             & (s_weight.min_element() >= 0.0)
             & (s_fcos.min_element() >= 0.0)
             & (s_wi != Vec3::ZERO);
-        let wi_world = to_world(&frame, s_wi);
+        let wi_world = frame.to_world(s_wi);
         let reflected = wi_world.dot(ng) > 0.0;
         let wo_above = wo_world.dot(ng) > 0.0;
         let ok = sampled & (s_weight.max_element() > 0.0) & (reflected == wo_above);
@@ -375,43 +375,6 @@ fn stage_shadow(scene: &Scene, w: &mut Wave, rngs: &mut [Pcg32], out: &mut [Lane
             w.beta_s.set(i, bs * k);
         }
     }
-}
-
-// Inlined copies of small helpers (the same operations), so that the lane loops hold no calls.
-
-#[inline(always)]
-fn frame_from_normal(n: Vec3) -> Frame {
-    let sign = 1.0f32.copysign(n.z);
-    let a = -1.0 / (sign + n.z);
-    let b = n.x * n.y * a;
-    let s = Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
-    let t = Vec3::new(b, sign + n.y * n.y * a, -n.y);
-    Frame { s, t, n }
-}
-
-#[inline(always)]
-fn to_local(f: &Frame, v: Vec3) -> Vec3 {
-    Vec3::new(v.dot(f.s), v.dot(f.t), v.dot(f.n))
-}
-
-#[inline(always)]
-fn to_world(f: &Frame, v: Vec3) -> Vec3 {
-    f.s * v.x + f.t * v.y + f.n * v.z
-}
-
-#[inline(always)]
-fn square_to_triangle(u: Vec2) -> Vec2 {
-    let (mut b0, mut b1);
-    if u.x < u.y {
-        b0 = u.x / 2.0;
-        b1 = u.y - b0;
-    } else {
-        b1 = u.y / 2.0;
-        b0 = u.x - b1;
-    }
-    b0 = b0.clamp(0.0, 1.0);
-    b1 = b1.clamp(0.0, 1.0);
-    Vec2::new(b1, 1.0 - b0 - b1).max(Vec2::ZERO)
 }
 
 #[inline(always)]
