@@ -110,6 +110,11 @@ pub struct Bvh {
     blocks: Vec<Tri4>,
     /// Traversal stack entries the deepest path can need.
     stack_need: usize,
+    /// Whether traversal prefetches the subtrees it stacks: only for a BVH larger than
+    /// `PREFETCH_MIN_BYTES`, which waits on memory; a small one stays in L1/L2, where the
+    /// prefetch loop (2 or 4 lines, by child kind) is only instructions and a branch that
+    /// alternates with the kind of child.
+    prefetch_stacked: bool,
     /// Set where the CPU has AVX2 and FMA: traversal then tests the eight children of a node
     /// in one 8-wide AVX operation (`avx2::node_test`) instead of two SSE2 ones.
     #[cfg(target_arch = "x86_64")]
@@ -137,12 +142,17 @@ impl RayData {
         if !o.is_finite() || !d.is_finite() {
             return None;
         }
-        let (k, [sx, sy, sz]) = triangle::shear_axes(d)?;
-        let inv = |x: f32| 1.0 / if x.abs() < MIN_DIR { MIN_DIR.copysign(x) } else { x };
+        let k = triangle::shear_perm(d)?;
+        let clamp = |x: f32| if x.abs() < MIN_DIR { MIN_DIR.copysign(x) } else { x };
+        // The three reciprocals and the shear's 1/d[kz] in one division (each lane rounds as
+        // the scalar division would): four scalar divisions were a latency chain at the start
+        // of every query.
+        let [ix, iy, iz, sz] = (Vec4::ONE / Vec4::new(clamp(d.x), clamp(d.y), clamp(d.z), d[k[2]])).to_array();
+        let (sx, sy) = (d[k[0]] * sz, d[k[1]] * sz);
         let near = |i: usize| if d[i] < 0.0 { 3 + i } else { i };
         Some(RayData {
             o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
-            inv: [Vec4::splat(inv(d.x)), Vec4::splat(inv(d.y)), Vec4::splat(inv(d.z))],
+            inv: [Vec4::splat(ix), Vec4::splat(iy), Vec4::splat(iz)],
             near: [near(0), near(1), near(2)],
             far: [(near(0) + 3) % 6, (near(1) + 3) % 6, (near(2) + 3) % 6],
             k,
@@ -158,6 +168,10 @@ type Stack = [StackEntry; STACK];
 
 /// Hit record inside the traversal: t, original triangle index, b1, b2.
 type HitRec = (f32, u32, f32, f32);
+
+/// What an any-hit (`ANY`) leaf test reports for a hit: a placeholder, since `occluded` only
+/// asks whether there is one.
+const ANY_HIT: HitRec = (0.0, u32::MAX, 0.0, 0.0);
 
 /// What a traversal did, for statistics (`Bvh::intersect_counted`); the benchmark traversal
 /// uses `NoProbe`, which compiles to nothing.
@@ -242,7 +256,9 @@ impl Bvh {
     }
 
     fn new(nodes: Vec<Node>, blocks: Vec<Tri4>, stack_need: usize) -> Bvh {
+        let bytes = nodes.len() * std::mem::size_of::<Node>() + blocks.len() * std::mem::size_of::<Tri4>();
         Bvh {
+            prefetch_stacked: bytes > PREFETCH_MIN_BYTES,
             nodes,
             blocks,
             stack_need,
@@ -413,7 +429,7 @@ impl Bvh {
                         let c = m.trailing_zeros() as usize;
                         m &= m - 1;
                         let e = (node.child[c], tnear[c]);
-                        if PREFETCH {
+                        if self.prefetch_stacked {
                             self.prefetch(e.0);
                         }
                         let mut j = sp;
@@ -460,7 +476,9 @@ impl Bvh {
     }
 }
 
-const PREFETCH: bool = true;
+/// Smallest BVH (nodes and blocks) whose traversal prefetches: a mesh of `SMALL_MESH`
+/// triangles has ~200 KB of blocks, which this CPU's 1 MiB L2 keeps.
+const PREFETCH_MIN_BYTES: usize = 256 << 10;
 
 impl Bvh {
     /// Starts loading a stacked subtree's node or leaf block while the nearer one is traversed:
@@ -517,7 +535,7 @@ fn leaf_test_tri4<const ANY: bool, P: Probe>(
 ) -> bool {
     for blk in blocks {
         probe.block();
-        let h = match tri4_fast(blk, r, *tmax) {
+        let h = match tri4_fast::<ANY>(blk, r, *tmax) {
             Tri4Result::Miss => continue,
             Tri4Result::Hit(h) => h,
             Tri4Result::EdgeZero => match tri4_scalar(blk, r, *tmax) {
@@ -547,7 +565,7 @@ impl NodeTest for Sse2 {
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{tri4_test, HitRec, Node, NodeTest, Probe, RayData, Tri4, SLAB_WIDEN, W};
+    use super::{tri4_test, HitRec, Node, NodeTest, Probe, RayData, Tri4, ANY_HIT, SLAB_WIDEN, W};
     use std::arch::x86_64::*;
 
     /// Proof that this CPU has AVX2 and FMA: only `detect` makes one. `tri8`: leaves are
@@ -621,8 +639,8 @@ mod avx2 {
         }
     }
 
-    /// `tri4_test(a)` and then `tri4_test(b)` against the closer `tmax` (with `ANY`: `b` only
-    /// where `a` misses), in one pass of 256-bit operations: lanes 0..4 are `a`'s triangles,
+    /// `tri4_test(a)` and then `tri4_test(b)` against the closer `tmax` (with `ANY`: whether
+    /// either has a hit, `ANY_HIT`), in one pass of 256-bit operations: lanes 0..4 are `a`'s triangles,
     /// 4..8 `b`'s, and every lane computes exactly `tri4_test`'s operations, so the result is
     /// bit-identical to the two `Tri4` tests (which remain the path where an edge function
     /// rounds to zero). The only order-dependent step of the sequence, `b` being tested
@@ -715,6 +733,9 @@ mod avx2 {
             if m == 0 {
                 return None;
             }
+            if ANY {
+                return Some(ANY_HIT);
+            }
             let mut ta = [0.0f32; W];
             _mm256_storeu_ps(ta.as_mut_ptr(), t);
             let closest = |mut m: u32| {
@@ -732,11 +753,7 @@ mod avx2 {
             if m & 0xf != 0 && m & 0xf0 != 0 {
                 // `b`'s lanes must also be in range of `a`'s hit, as when tested after it.
                 let ta_best = ta[closest(m & 0xf)];
-                if ANY {
-                    m &= 0xf;
-                } else {
-                    m &= 0xf | _mm256_movemask_ps(in_range!(_mm256_set1_ps(ta_best))) as u32;
-                }
+                m &= 0xf | _mm256_movemask_ps(in_range!(_mm256_set1_ps(ta_best))) as u32;
             }
             let lane = closest(m);
             let mut da = [0.0f32; W];
@@ -785,7 +802,7 @@ fn node_test(node: &Node, r: &RayData, tmax: f32) -> (u32, [f32; W]) {
 /// Exactly the floating-point operations of `triangle::intersect`, four lanes at a time.
 #[inline(always)]
 fn tri4_test(blk: &Tri4, r: &RayData, tmax: f32) -> Option<HitRec> {
-    match tri4_fast(blk, r, tmax) {
+    match tri4_fast::<false>(blk, r, tmax) {
         Tri4Result::Miss => None,
         Tri4Result::Hit(h) => Some(h),
         Tri4Result::EdgeZero => tri4_scalar(blk, r, tmax),
@@ -806,8 +823,11 @@ enum Tri4Result {
 /// outcomes on separate paths: merged with the out-of-line fallback's result (returned through
 /// memory), the hit record was assembled in memory by four scalar stores and reloaded at once
 /// by `*best = Some(h)`, a failed store-to-load forward on every leaf hit.
+///
+/// With `ANY` a hit is `ANY_HIT`: an any-hit query only asks whether there is one, so the
+/// closest lane, its division and its barycentrics are skipped.
 #[inline(always)]
-fn tri4_fast(blk: &Tri4, r: &RayData, tmax: f32) -> Tri4Result {
+fn tri4_fast<const ANY: bool>(blk: &Tri4, r: &RayData, tmax: f32) -> Tri4Result {
     let [kx, ky, kz] = r.k;
     let [sx, sy, sz] = r.s;
     let sheared = |v: &[Vec4; 3]| {
@@ -843,6 +863,9 @@ fn tri4_fast(blk: &Tri4, r: &RayData, tmax: f32) -> Tri4Result {
     let mut m = ok.bitmask();
     if m == 0 {
         return Tri4Result::Miss;
+    }
+    if ANY {
+        return Tri4Result::Hit(ANY_HIT);
     }
     let ta = t.to_array();
     let mut lane = m.trailing_zeros() as usize;

@@ -50,6 +50,15 @@ impl RayShear {
 /// direction. Both this file's `RayShear` and the BVH's four-wide test shear with it.
 #[inline(always)]
 pub fn shear_axes(dir: Vec3) -> Option<([usize; 3], [f32; 3])> {
+    let [kx, ky, kz] = shear_perm(dir)?;
+    let sz = 1.0 / dir[kz];
+    Some(([kx, ky, kz], [dir[kx] * sz, dir[ky] * sz, sz]))
+}
+
+/// The axes `[kx, ky, kz]` of `shear_axes`, for a caller that computes `sz` itself (the BVH
+/// divides it together with the box test's reciprocals, in one vector division).
+#[inline(always)]
+pub fn shear_perm(dir: Vec3) -> Option<[usize; 3]> {
     let a = dir.abs();
     let kz = if a.x > a.y {
         if a.x > a.z {
@@ -70,8 +79,7 @@ pub fn shear_axes(dir: Vec3) -> Option<([usize; 3], [f32; 3])> {
     if dir[kz] < 0.0 {
         std::mem::swap(&mut kx, &mut ky);
     }
-    let sz = 1.0 / dir[kz];
-    Some(([kx, ky, kz], [dir[kx] * sz, dir[ky] * sz, sz]))
+    Some([kx, ky, kz])
 }
 
 /// Intersection of the sheared ray with triangle (p0, p1, p2): `(t, b1, b2)` with t in (0, tmax),
