@@ -147,8 +147,10 @@ impl RayData {
         // The three reciprocals and the shear's 1/d[kz] in one division (each lane rounds as
         // the scalar division would): four scalar divisions were a latency chain at the start
         // of every query.
-        let [ix, iy, iz, sz] = (Vec4::ONE / Vec4::new(clamp(d.x), clamp(d.y), clamp(d.z), d[k[2]])).to_array();
-        let (sx, sy) = (d[k[0]] * sz, d[k[1]] * sz);
+        // (`d` as an array for the computed axes: see `triangle::shear_perm`.)
+        let da = d.to_array();
+        let [ix, iy, iz, sz] = (Vec4::ONE / Vec4::new(clamp(d.x), clamp(d.y), clamp(d.z), da[k[2]])).to_array();
+        let (sx, sy) = (da[k[0]] * sz, da[k[1]] * sz);
         let near = |i: usize| if d[i] < 0.0 { 3 + i } else { i };
         Some(RayData {
             o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],

@@ -51,22 +51,26 @@ impl RayShear {
 #[inline(always)]
 pub fn shear_axes(dir: Vec3) -> Option<([usize; 3], [f32; 3])> {
     let [kx, ky, kz] = shear_perm(dir)?;
-    let sz = 1.0 / dir[kz];
-    Some(([kx, ky, kz], [dir[kx] * sz, dir[ky] * sz, sz]))
+    let d = dir.to_array();
+    let sz = 1.0 / d[kz];
+    Some(([kx, ky, kz], [d[kx] * sz, d[ky] * sz, sz]))
 }
 
 /// The axes `[kx, ky, kz]` of `shear_axes`, for a caller that computes `sz` itself (the BVH
 /// divides it together with the box test's reciprocals, in one vector division).
 #[inline(always)]
 pub fn shear_perm(dir: Vec3) -> Option<[usize; 3]> {
-    let a = dir.abs();
-    let kz = if a.x > a.y {
-        if a.x > a.z {
+    // Arrays, not `Vec3`'s `Index` (a `match` on the axis): indexed by a computed axis, that
+    // compiled to compare-and-branch chains on the ray's direction, mispredicted per ray.
+    let d = dir.to_array();
+    let a = dir.abs().to_array();
+    let kz = if a[0] > a[1] {
+        if a[0] > a[2] {
             0
         } else {
             2
         }
-    } else if a.y > a.z {
+    } else if a[1] > a[2] {
         1
     } else {
         2
@@ -76,7 +80,7 @@ pub fn shear_perm(dir: Vec3) -> Option<[usize; 3]> {
     }
     let mut kx = (kz + 1) % 3;
     let mut ky = (kx + 1) % 3;
-    if dir[kz] < 0.0 {
+    if d[kz] < 0.0 {
         std::mem::swap(&mut kx, &mut ky);
     }
     Some([kx, ky, kz])
