@@ -4,6 +4,7 @@
 pub mod path;
 pub mod wave;
 
+use crate::camera::Camera;
 use crate::film::descriptors::FIELDS;
 use crate::film::{BufferRequest, Descriptors, Frame, PixelBuffer, Welford};
 use crate::math::Ray;
@@ -176,10 +177,9 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
                         let pixel = py as u64 * cw as u64 + px as u64;
                         let li = (ly * tw + lx) as usize;
                         for s in 0..opts.spp {
-                            let mut rng = Pcg32::for_sample(opts.seed, pixel, (opts.first_sample + s) as u64);
-                            let film = Vec2::new(px as f32, py as f32) + rng.next_2d();
+                            let (rng, ray) = start_sample(cam, opts, px, py, pixel, s);
                             batch.pixel.push(li);
-                            batch.ray.push(cam.ray(film));
+                            batch.ray.push(ray);
                             batch.rng.push(rng);
                             if batch.pixel.len() == wave::LANES {
                                 run_batch(&mut t, &mut batch);
@@ -199,9 +199,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
                     let pixel = py as u64 * cw as u64 + px as u64;
                     let li = (ly * tw + lx) as usize;
                     for s in 0..opts.spp {
-                        let mut rng = Pcg32::for_sample(opts.seed, pixel, (opts.first_sample + s) as u64);
-                        let film = Vec2::new(px as f32, py as f32) + rng.next_2d();
-                        let ray = cam.ray(film);
+                        let (mut rng, ray) = start_sample(cam, opts, px, py, pixel, s);
                         let mut r = path::trace(scene, ray, &mut rng, opts.max_bounces, opts.russian_roulette, req);
                         t.rays += r.rays as u64;
                         if !(r.radiance.is_finite() && r.diffuse.is_finite()) {
@@ -283,6 +281,15 @@ struct Batch {
     pixel: Vec<usize>,
     ray: Vec<Ray>,
     rng: Vec<Pcg32>,
+}
+
+/// A sample's own random stream and its camera ray: the wavefront and the per-sample loop
+/// start every sample here, so both trace the same rays with the same streams.
+#[inline(always)]
+fn start_sample(cam: &Camera, opts: &RenderOptions, px: u32, py: u32, pixel: u64, s: u32) -> (Pcg32, Ray) {
+    let mut rng = Pcg32::for_sample(opts.seed, pixel, (opts.first_sample + s) as u64);
+    let film = Vec2::new(px as f32, py as f32) + rng.next_2d();
+    (rng, cam.ray(film))
 }
 
 fn push3(acc: &mut [Welford], v: Vec3) {
