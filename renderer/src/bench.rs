@@ -268,6 +268,11 @@ pub struct RaySetReport {
     /// Embree's single-thread rays/s (embreex loops rtcIntersect1 on one thread), per CPU second
     /// of that thread like `ours_1t`.
     pub embree_1t: Option<f64>,
+    /// Median over the repetitions of ours (1t) / Embree (1t), each pair run back to back: on a
+    /// machine whose neighbours move both rates by ±15 % from one second to the next (the
+    /// KVM guest of 2026-11-29), a steadier figure than the ratio of the two bests, which
+    /// may come from different moments.
+    pub pair_ratio_median: Option<f64>,
 }
 
 #[derive(Clone, Debug)]
@@ -335,15 +340,19 @@ pub fn ray_bench(
         // else loads the machine; the best run of each is reported.
         let (mut ours_mt, mut ours_1t, mut hits) = (0.0f64, 0.0f64, 0);
         let mut embree_1t: Option<f64> = None;
+        let mut pair_ratios = Vec::new();
         for _ in 0..repeats.max(1) {
             let (r, h) = rate(&pool_mt, batch, false);
             ours_mt = ours_mt.max(r);
             hits = h;
-            ours_1t = ours_1t.max(rate(&pool_1t, batch, true).0);
+            let one = rate(&pool_1t, batch, true).0;
+            ours_1t = ours_1t.max(one);
             if let Some(e) = embree {
                 let r = embree_trace(&e.python, &e.script, &e.work_dir, mesh, batch, e.robust)?;
                 let secs = if r.query_cpu_seconds > 0.0 { r.query_cpu_seconds } else { r.query_seconds };
-                embree_1t = Some(embree_1t.unwrap_or(0.0).max(batch.len() as f64 / secs));
+                let e_rate = batch.len() as f64 / secs;
+                pair_ratios.push(one / e_rate);
+                embree_1t = Some(embree_1t.unwrap_or(0.0).max(e_rate));
                 embree_build = Some(embree_build.map_or(r.build_seconds, |b: f64| b.min(r.build_seconds)));
             }
         }
@@ -354,6 +363,7 @@ pub fn ray_bench(
             ours_mt,
             ours_1t,
             embree_1t,
+            pair_ratio_median: median(&pair_ratios),
         });
     }
     Ok(RayBenchReport {
@@ -364,6 +374,14 @@ pub fn ray_bench(
         embree_build_seconds: embree_build,
         sets: reports,
     })
+}
+
+/// Median (mean of the two middle values for an even count); `None` for no values.
+fn median(v: &[f64]) -> Option<f64> {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    (n > 0).then(|| if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) })
 }
 
 impl fmt::Display for RayBenchReport {
@@ -400,6 +418,9 @@ impl fmt::Display for RayBenchReport {
                     self.threads,
                     s.ours_mt / (e * self.threads as f64)
                 )?;
+                if let Some(m) = s.pair_ratio_median {
+                    write!(f, "; median of the run-by-run 1t ratios {m:.2}x")?;
+                }
             }
             writeln!(f)?;
         }
@@ -466,4 +487,16 @@ pub fn displaced_sphere(n: u32, m: u32, style: SphereStyle) -> Mesh {
     let mut mesh = Mesh::default();
     mesh.append(&positions, &[], &[], &tris, 0);
     mesh
+}
+
+#[cfg(test)]
+mod tests {
+    use super::median;
+
+    #[test]
+    fn median_of_odd_and_even_counts() {
+        assert_eq!(median(&[]), None);
+        assert_eq!(median(&[3.0, 1.0, 2.0]), Some(2.0));
+        assert_eq!(median(&[4.0, 1.0, 3.0, 2.0]), Some(2.5));
+    }
 }
