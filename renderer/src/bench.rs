@@ -269,9 +269,9 @@ pub struct RaySetReport {
     /// of that thread like `ours_1t`.
     pub embree_1t: Option<f64>,
     /// Median over the repetitions of ours (1t) / Embree (1t), each pair run back to back: on a
-    /// machine whose neighbours move both rates by ±15 % from one second to the next (the
-    /// KVM guest of 2026-11-29), a steadier figure than the ratio of the two bests, which
-    /// may come from different moments.
+    /// machine whose neighbours move both rates by up to 45 % between runs (the KVM guest of
+    /// 2026-11-29, docs/performance.md), a steadier figure than the ratio of the two bests,
+    /// which may come from different moments.
     pub pair_ratio_median: Option<f64>,
 }
 
