@@ -11,8 +11,9 @@ validation relMSE given with --val (measure it; docs/denoiser.md says how the sh
 
   tools/average_weights.py A.safetensors B.safetensors --alpha 0.3 --val 0.0245 -o OUT.safetensors
 
-Standard library only. Deterministic: the same inputs give the same bytes (every sum is
-rounded to the file's float type as numpy would, through struct's 'e'/'f' packing).
+Standard library only. The tensors are deterministic: the same inputs and alpha give the same
+tensor bytes (each mean is computed in double precision and rounded to the file's float type
+by struct's 'e'/'f' packing); only the provenance's date differs between runs.
 """
 import argparse
 import datetime
