@@ -36,20 +36,8 @@ torch_lib=target/torch-venv/lib/python3.11/site-packages/torch/lib
 if [ "$backend" != flex ] && [ -d "$torch_lib" ] && [[ "${LD_LIBRARY_PATH:-}" != *torch* ]]; then
     export LD_LIBRARY_PATH="$PWD/$torch_lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 fi
-# The allocator (docs/training.md, "Memory allocator"). glibc maps every allocation over 32 MiB
-# afresh and faults it in page by page: half of a p step went to the kernel. jemalloc with its
-# decay off keeps those pages, and `pixguide train` hands them back every 30 s and after each
-# validation, which keeps each process at 4-8 GB: p steps 1.6x, both 1.3x faster than on glibc
-# with huge pages. JEMALLOC=lane1 or lane2 for one lane only, none for glibc (with transparent
-# huge pages for its mappings, GLIBC_TUNABLES glibc.malloc.hugetlb=1), also used when jemalloc is
-# not installed (Debian: apt-get install libjemalloc2).
-export GLIBC_TUNABLES=${GLIBC_TUNABLES:-glibc.malloc.hugetlb=1}
-use_jemalloc() { # lane
-    local lib=/usr/lib/x86_64-linux-gnu/libjemalloc.so.2
-    if { [ "${JEMALLOC:-all}" = all ] || [ "${JEMALLOC:-all}" = "$1" ]; } && [ -e "$lib" ]; then
-        export LD_PRELOAD=$lib MALLOC_CONF=${MALLOC_CONF:-narenas:1,dirty_decay_ms:-1,muzzy_decay_ms:-1}
-    fi
-}
+# The allocator: tools/allocator.sh. JEMALLOC=lane1 or lane2 for one lane only, none for glibc.
+source "$(dirname "$0")/allocator.sh"
 # The shipped recipe's losses (tools/train_set.sh, docs/denoiser.md): g, both and the joint
 # stage weigh each patch's L1 plus a relative L2 term by the input's error; p the relative L1.
 inside=(--loss-scale relative-to-input --rel-l2-weight 1 --rel-l2-inside)

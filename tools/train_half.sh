@@ -15,8 +15,8 @@
 #   tools/train_half.sh DATA OUT     # e.g. tools/train_half.sh /work/data/campaign /work/runs/half
 #
 # Environment: PIXGUIDE (the binary, a `--features tch` build for BACKEND=tch)
-# [target/release/pixguide], BACKEND [tch], THREADS [1] (per lane), JEMALLOC [yes; none for glibc].
-# The half files shipped until 2026-11-28 are the KPCN half models of 2026-11-23 (preset `half`),
+# [target/release/pixguide], BACKEND [tch], THREADS [1] (per lane), JEMALLOC [all; none for glibc].
+# The half files shipped until 2026-11-29 are the KPCN half models of 2026-11-23 (preset `half`),
 # made by this script's earlier version (git log -p tools/train_half.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -30,13 +30,8 @@ torch_lib=target/torch-venv/lib/python3.11/site-packages/torch/lib
 if [ "$backend" != flex ] && [ -d "$torch_lib" ] && [[ "${LD_LIBRARY_PATH:-}" != *torch* ]]; then
     export LD_LIBRARY_PATH="$PWD/$torch_lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 fi
-# The allocator (tools/campaign.sh, docs/training.md "Memory allocator"): jemalloc with its decay
-# off where installed (p steps 1.6x faster than on glibc), else glibc with huge pages.
-export GLIBC_TUNABLES=${GLIBC_TUNABLES:-glibc.malloc.hugetlb=1}
-jemalloc=/usr/lib/x86_64-linux-gnu/libjemalloc.so.2
-if [ "${JEMALLOC:-yes}" != none ] && [ -e "$jemalloc" ]; then
-    export LD_PRELOAD=$jemalloc MALLOC_CONF=${MALLOC_CONF:-narenas:1,dirty_decay_ms:-1,muzzy_decay_ms:-1}
-fi
+source tools/allocator.sh # jemalloc where installed; JEMALLOC=none for glibc
+use_jemalloc all
 common=(--backend "$backend" --data "$D" --preset edge-noise --widths 12,16,24,32,40 --patch 96 --batch 2 --seed 1 --resume)
 inside=(--loss-scale relative-to-input --rel-l2-weight 1 --rel-l2-inside)
 run() { local t=$1; shift; OMP_NUM_THREADS=$t nice "$P" --threads "$t" train "${common[@]}" "$@"; }
