@@ -4,9 +4,12 @@
 //! followed by `:sse2` to force the SSE2 node test, `:tri4` for the AVX2 node test with leaves
 //! tested one `Tri4` block at a time (`:` for the default) and by an obvhs build
 //! preset (`:fast`, `:medium`, `:slow`; `very_fast` by default), e.g.
-//! `REPS=7 cargo run --release -p renderer --example bvh_ab -- 3:sse2 3 4 3::slow`.
+//! `REPS=7 cargo run --release -p renderer --example bvh_ab -- 3:sse2 3 4 3::slow`. Rays are
+//! traced one `intersect` after another in a loop (`bench::trace_one_at_a_time`), or, for a
+//! variant prefixed with `r` (`r5`), through `bench::trace`'s parallel iterator on the
+//! one-thread pool.
 
-use renderer::bench::{displaced_sphere, thread_cpu_seconds, trace, RayBatch, SphereStyle};
+use renderer::bench::{displaced_sphere, thread_cpu_seconds, trace, trace_one_at_a_time, RayBatch, SphereStyle};
 use renderer::geometry::bvh::default_build_params;
 use renderer::geometry::Accel;
 use renderer::scene::Scene;
@@ -24,7 +27,7 @@ fn main() {
         let accels: Vec<Accel> = variants
             .iter()
             .map(|v| {
-                let mut parts = v.split(':');
+                let mut parts = v.trim_start_matches('r').split(':');
                 let c = parts.next().unwrap_or("");
                 let isa = parts.next().unwrap_or("");
                 let params = match parts.next().unwrap_or("") {
@@ -53,10 +56,10 @@ fn main() {
         for (set, batch) in [("camera", &cam), ("random", &rnd)] {
             let mut times = vec![Vec::new(); accels.len()];
             for _ in 0..reps {
-                for (i, a) in accels.iter().enumerate() {
+                for (i, (a, v)) in accels.iter().zip(&variants).enumerate() {
                     let s = pool.install(|| {
                         let c0 = thread_cpu_seconds().unwrap();
-                        let r = trace(a, batch, 0);
+                        let r = if v.starts_with('r') { trace(a, batch, 0) } else { trace_one_at_a_time(a, batch) };
                         std::hint::black_box(r);
                         thread_cpu_seconds().unwrap() - c0
                     });
