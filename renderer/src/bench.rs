@@ -164,7 +164,7 @@ pub fn trace(accel: &Accel, batch: &RayBatch, threads: usize) -> Vec<Option<Hit>
 
 /// Closest hits of every ray of `batch` on the calling thread, one `Accel::intersect` after
 /// another: the single-thread figure, measured as Embree's is (embreex loops `rtcIntersect1`
-/// over the rays), without a thread pool's splitting and collecting, which cost 6–9 % of the
+/// over the rays), without a thread pool's splitting and collecting, which cost 5–9 % of the
 /// Cornell box's rate on one thread (docs/performance.md).
 pub fn trace_one_at_a_time(accel: &Accel, batch: &RayBatch) -> Vec<Option<Hit>> {
     (0..batch.len()).map(|i| accel.intersect(&batch.ray(i), batch.tmax[i])).collect()
