@@ -304,8 +304,8 @@ pub struct EmbreeSetup {
 
 /// Builds the BVH of `mesh` (timed; the best of three builds), then traces each ray set with
 /// `threads` threads, with one, and with Embree if `embree` is given, alternating run by run
-/// (best of `repeats` runs each). Rays/s count closest-hit queries only; see `RaySetReport`
-/// for the clocks.
+/// (best of `repeats` runs each; our BVH is built anew, untimed, for every run after the
+/// first). Rays/s count closest-hit queries only; see `RaySetReport` for the clocks.
 pub fn ray_bench(
     mesh: &Mesh,
     sets: &[(&str, &RayBatch)],
