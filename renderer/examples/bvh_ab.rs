@@ -7,9 +7,11 @@
 //! `REPS=7 cargo run --release -p renderer --example bvh_ab -- 3:sse2 3 4 3::slow`. Rays are
 //! traced one `intersect` after another in a loop (`bench::trace_one_at_a_time`), or, for a
 //! variant prefixed with `r` (`r5`), through `bench::trace`'s parallel iterator on the
-//! one-thread pool.
+//! one-thread pool. The variant `e` is Embree in this process (`renderer::embree`, the library
+//! of `target/embree-venv`, fast mode; `er` its robust mode), traced in the same kind of loop.
 
 use renderer::bench::{displaced_sphere, thread_cpu_seconds, trace, trace_one_at_a_time, RayBatch, SphereStyle};
+use renderer::embree::{library_in_venv, Embree, EmbreeScene};
 use renderer::geometry::bvh::default_build_params;
 use renderer::geometry::Accel;
 use renderer::scene::Scene;
@@ -21,12 +23,20 @@ fn main() {
     let ws = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf();
     let scene = Scene::load(&ws.join("scenes/cornell-box/scene.toml")).expect("scene");
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    let is_embree = |v: &str| v == "e" || v == "er";
+    let embree = variants.iter().any(|v| is_embree(v)).then(|| {
+        let path = library_in_venv(&ws.join("target/embree-venv")).unwrap_or_else(|e| panic!("{e}"));
+        Embree::load(&path).unwrap_or_else(|e| panic!("{e}"))
+    });
     for (name, mesh) in [("cornell", scene.mesh.clone()), ("sphere", displaced_sphere(230, 230, SphereStyle::Bench))] {
         let cam = RayBatch::camera(&mesh, 500_000, 1);
         let rnd = RayBatch::random_in_bounds(&mesh, 500_000, 2);
-        let accels: Vec<Accel> = variants
+        let accels: Vec<Option<Accel>> = variants
             .iter()
             .map(|v| {
+                if is_embree(v) {
+                    return None;
+                }
                 let mut parts = v.trim_start_matches('r').split(':');
                 let c = parts.next().unwrap_or("");
                 let isa = parts.next().unwrap_or("");
@@ -41,10 +51,15 @@ fn main() {
                 let mut a = Accel::build_tuned(&mesh, params, c.parse().expect("variant: a node cost"));
                 a.set_avx2(isa != "sse2");
                 a.set_tri8(isa != "tri4");
-                a
+                Some(a)
             })
             .collect();
+        let scenes: Vec<Option<EmbreeScene>> = variants
+            .iter()
+            .map(|v| is_embree(v).then(|| embree.as_ref().unwrap().scene(&mesh, v == "er").unwrap_or_else(|e| panic!("{e}"))))
+            .collect();
         for (v, a) in variants.iter().zip(&accels) {
+            let Some(a) = a else { continue };
             let s = a.bvh_shape();
             print!("{name} [{v}]: {} nodes, fill {:.2}, {} blocks;", s.nodes, s.avg_fill, s.blocks);
             for (set, batch) in [("camera", &cam), ("random", &rnd)] {
@@ -56,11 +71,19 @@ fn main() {
         for (set, batch) in [("camera", &cam), ("random", &rnd)] {
             let mut times = vec![Vec::new(); accels.len()];
             for _ in 0..reps {
-                for (i, (a, v)) in accels.iter().zip(&variants).enumerate() {
+                for (i, ((a, e), v)) in accels.iter().zip(&scenes).zip(&variants).enumerate() {
                     let s = pool.install(|| {
                         let c0 = thread_cpu_seconds().unwrap();
-                        let r = if v.starts_with('r') { trace(a, batch, 0) } else { trace_one_at_a_time(a, batch) };
-                        std::hint::black_box(r);
+                        match (a, e) {
+                            (Some(a), _) if v.starts_with('r') => drop(std::hint::black_box(trace(a, batch, 0))),
+                            (Some(a), _) => drop(std::hint::black_box(trace_one_at_a_time(a, batch))),
+                            (None, Some(e)) => {
+                                let r: Vec<_> =
+                                    (0..batch.len()).map(|i| e.intersect(batch.origins[i], batch.dirs[i], batch.tmax[i])).collect();
+                                drop(std::hint::black_box(r));
+                            }
+                            (None, None) => unreachable!("every variant is ours or Embree"),
+                        }
                         thread_cpu_seconds().unwrap() - c0
                     });
                     times[i].push(batch.len() as f64 / s * 1e-6);

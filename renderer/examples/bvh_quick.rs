@@ -11,7 +11,7 @@ fn main() {
     let rays: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(500_000);
     let ws = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf();
     let python = embree_python(&ws.join("target/embree-venv")).expect("embree venv");
-    let setup = EmbreeSetup { python, script: embree_script(&ws), work_dir: ws.join("target/embree-bench"), robust: false };
+    let setup = EmbreeSetup { python, script: embree_script(&ws), work_dir: ws.join("target/embree-bench"), robust: false, library: None };
     let scene = Scene::load(&ws.join("scenes/cornell-box/scene.toml")).expect("scene");
     for (name, mesh) in [("cornell", scene.mesh.clone()), ("sphere", displaced_sphere(230, 230, SphereStyle::Bench))] {
         let cam = RayBatch::camera(&mesh, rays, 1);

@@ -14,7 +14,7 @@ fn main() {
     let robust = args.iter().any(|a| a == "robust");
     let ws = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf();
     let python = embree_python(&ws.join("target/embree-venv")).expect("embree venv");
-    let setup = EmbreeSetup { python, script: embree_script(&ws), work_dir: ws.join("target/embree-bench"), robust };
+    let setup = EmbreeSetup { python, script: embree_script(&ws), work_dir: ws.join("target/embree-bench"), robust, library: None };
     let meshes = [
         ("cornell-box-mcguire", obj_mesh(&ws.join("scenes/assets/cornell-box-mcguire/CornellBox-Original.obj")).expect("obj loads")),
         ("stanford-bunny", obj_mesh(&ws.join("scenes/assets/stanford-bunny/bunny.obj")).expect("obj loads")),

@@ -9,6 +9,7 @@
 
 pub mod bench;
 pub mod camera;
+pub mod embree;
 pub mod error;
 pub mod film;
 pub mod geometry;

@@ -97,3 +97,54 @@ fn matches_embree_on_a_million_rays() {
     // relative). A t disagreement means one of us skipped the nearer triangle: same budget.
     assert!(t_off as f64 <= 1e-4 * total as f64, "{t_off} t disagreements in {total} rays");
 }
+
+/// The in-process binding (`renderer::embree`, used by `pixguide bench`) against embreex on the
+/// same rays: the same library, scene flags and triangles, so the same answers. A wrong
+/// `RTCRayHit` layout or argument would show as misses, wrong primitives or wrong distances.
+#[test]
+#[ignore = "network tier: installs Embree (embreex) from PyPI the first time; run with --include-ignored"]
+fn in_process_embree_matches_embreex() {
+    let venv = workspace().join("target/embree-venv");
+    let python = embree_python(&venv).unwrap_or_else(|e| panic!("needs the embreex venv (python3 -m venv, pip): {e}"));
+    let lib_path = renderer::embree::library_in_venv(&venv).unwrap_or_else(|e| panic!("{e}"));
+    let embree = renderer::embree::Embree::load(&lib_path).unwrap_or_else(|e| panic!("{e}"));
+    let script = embree_script(&workspace());
+    let work = workspace().join("target/embree-crosscheck");
+    let meshes = [
+        ("stanford-bunny", load_obj("scenes/assets/stanford-bunny/bunny.obj")),
+        ("displaced-sphere", displaced_sphere(230, 230, SphereStyle::Bench)),
+    ];
+    for robust in [false, true] {
+        for (k, (name, mesh)) in meshes.iter().enumerate() {
+            let scene = embree.scene(mesh, robust).unwrap_or_else(|e| panic!("{name}: {e}"));
+            for (set, batch) in [
+                ("camera", RayBatch::camera(mesh, 20_000, 7 + k as u64)),
+                ("random", RayBatch::random_in_bounds(mesh, 20_000, 7 + k as u64)),
+            ] {
+                let theirs = embree_trace(&python, &script, &work, mesh, &batch, robust).unwrap_or_else(|e| panic!("{name}/{set}: {e}"));
+                let (mut hits, mut differ) = (0, 0);
+                for (i, b) in theirs.hits.iter().enumerate() {
+                    let a = scene.intersect(batch.origins[i], batch.dirs[i], batch.tmax[i]);
+                    hits += a.is_some() as usize;
+                    // The same distance (a tie between two triangles sharing the hit point may
+                    // be broken either way by two builds, so the primitive may differ).
+                    let same = match (a, b) {
+                        (Some((_, ta)), Some((_, tb))) => (ta - tb).abs() <= 1e-6 * ta.abs().max(tb.abs()),
+                        (None, None) => true,
+                        _ => false,
+                    };
+                    if !same {
+                        differ += 1;
+                        if differ <= 3 {
+                            eprintln!("{name}/{set} robust={robust} ray {i}: in process {a:?}, embreex {b:?}");
+                        }
+                    }
+                }
+                println!("{name:<17} {set:<7} robust={robust}: {hits} hits, {differ} answers differ of {}", batch.len());
+                assert!(hits > batch.len() / 10, "{name}/{set}: too few hits ({hits}) to check the binding");
+                // One build's tie-breaking against another's: 1e-4 of the rays at most.
+                assert!(differ as f64 <= 1e-4 * batch.len() as f64, "{name}/{set} robust={robust}: {differ} answers differ");
+            }
+        }
+    }
+}

@@ -107,7 +107,18 @@ fn rays(scene: &Scene, a: &BenchArgs, threads: usize) -> Result<()> {
     } else {
         let ws = Path::new(".");
         match embree_python(&ws.join("target/embree-venv")) {
-            Ok(python) => Some(EmbreeSetup { python, script: embree_script(ws), work_dir: ws.join("target/embree-bench"), robust: false }),
+            Ok(python) => {
+                // The same library in this process as well: the tighter comparison.
+                let venv = ws.join("target/embree-venv");
+                let library = match renderer::embree::library_in_venv(&venv).and_then(|p| renderer::embree::Embree::load(&p)) {
+                    Ok(lib) => Some(lib),
+                    Err(e) => {
+                        eprintln!("warning: Embree in this process skipped (embreex's figures still shown): {e}");
+                        None
+                    }
+                };
+                Some(EmbreeSetup { python, script: embree_script(ws), work_dir: ws.join("target/embree-bench"), robust: false, library })
+            }
             Err(e) => {
                 eprintln!("warning: Embree comparison skipped: {e}");
                 None
