@@ -8,7 +8,7 @@
 //! traced one `intersect` after another in a loop (`bench::trace_one_at_a_time`), or, for a
 //! variant prefixed with `r` (`r5`), through `bench::trace`'s parallel iterator on the
 //! one-thread pool. The variant `e` is Embree in this process (`renderer::embree`, the library
-//! of `target/embree-venv`, fast mode; `er` its robust mode), traced in the same kind of loop.
+//! of `target/embree-venv`, fast mode; `er` its robust mode, `e2` kept to its AVX2 kernels), traced in the same kind of loop.
 
 use renderer::bench::{displaced_sphere, thread_cpu_seconds, trace, trace_one_at_a_time, RayBatch, SphereStyle};
 use renderer::embree::{library_in_venv, Embree, EmbreeScene};
@@ -23,11 +23,14 @@ fn main() {
     let ws = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf();
     let scene = Scene::load(&ws.join("scenes/cornell-box/scene.toml")).expect("scene");
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
-    let is_embree = |v: &str| v == "e" || v == "er";
-    let embree = variants.iter().any(|v| is_embree(v)).then(|| {
-        let path = library_in_venv(&ws.join("target/embree-venv")).unwrap_or_else(|e| panic!("{e}"));
-        Embree::load(&path).unwrap_or_else(|e| panic!("{e}"))
-    });
+    let is_embree = |v: &str| v == "e" || v == "er" || v == "e2";
+    let lib = |config: Option<&str>| {
+        variants.iter().any(|v| is_embree(v)).then(|| {
+            let path = library_in_venv(&ws.join("target/embree-venv")).unwrap_or_else(|e| panic!("{e}"));
+            Embree::load_with_config(&path, config).unwrap_or_else(|e| panic!("{e}"))
+        })
+    };
+    let (embree, embree_avx2) = (lib(None), lib(Some("isa=avx2")));
     for (name, mesh) in [("cornell", scene.mesh.clone()), ("sphere", displaced_sphere(230, 230, SphereStyle::Bench))] {
         let cam = RayBatch::camera(&mesh, 500_000, 1);
         let rnd = RayBatch::random_in_bounds(&mesh, 500_000, 2);
@@ -56,7 +59,10 @@ fn main() {
             .collect();
         let scenes: Vec<Option<EmbreeScene>> = variants
             .iter()
-            .map(|v| is_embree(v).then(|| embree.as_ref().unwrap().scene(&mesh, v == "er").unwrap_or_else(|e| panic!("{e}"))))
+            .map(|v| {
+                let dev = if v == "e2" { &embree_avx2 } else { &embree };
+                is_embree(v).then(|| dev.as_ref().unwrap().scene(&mesh, v == "er").unwrap_or_else(|e| panic!("{e}")))
+            })
             .collect();
         for (v, a) in variants.iter().zip(&accels) {
             let Some(a) = a else { continue };

@@ -281,13 +281,24 @@ pub struct RaySetReport {
     /// 2026-11-29, docs/performance.md), a steadier figure than the ratio of the two bests,
     /// which may come from different moments.
     pub pair_ratio_median: Option<f64>,
-    /// Embree called in this process (`EmbreeSetup::library`): its single-thread rays/s from a
-    /// loop of `rtcIntersect1` like ours, the median of the run-by-run ratios ours / it, and
-    /// the fraction of rays on which it and we disagree about hit or miss (a check of the
-    /// binding: its fast mode is not watertight, so a few edge rays may differ).
-    pub embree_lib_1t: Option<f64>,
-    pub lib_pair_ratio_median: Option<f64>,
-    pub lib_hit_disagreement: Option<f64>,
+    /// Embree called in this process (`EmbreeSetup::library`), in its fast mode and in its
+    /// robust (watertight, as our BVH is) mode; empty without the library.
+    pub in_process: Vec<InProcessFigures>,
+}
+
+/// Embree in this process, in one mode, on one ray set.
+#[derive(Clone, Debug)]
+pub struct InProcessFigures {
+    pub robust: bool,
+    /// Best single-thread rays/s (a loop of `rtcIntersect1`, like ours; per CPU second).
+    pub best_1t: f64,
+    /// Median over the repetitions of ours (1t) / it (1t), measured back to back.
+    pub pair_ratio_median: f64,
+    /// Fraction of rays on which it and we disagree about hit or miss: a check of the binding
+    /// (the fast mode is not watertight, so a few rays through edges may differ).
+    pub hit_disagreement: f64,
+    /// Best scene build (wall clock, Embree's TBB threads).
+    pub build_seconds: f64,
 }
 
 #[derive(Clone, Debug)]
@@ -297,8 +308,6 @@ pub struct RayBenchReport {
     pub build_seconds: f64,
     pub bvh_nodes: usize,
     pub embree_build_seconds: Option<f64>,
-    /// Best scene build (wall clock, Embree's own TBB threads) of Embree in this process.
-    pub embree_lib_build_seconds: Option<f64>,
     pub sets: Vec<RaySetReport>,
 }
 
@@ -310,7 +319,8 @@ pub struct EmbreeSetup {
     /// Embree's robust (watertight) mode instead of its fastest one.
     pub robust: bool,
     /// The same Embree library loaded into this process (`crate::embree`), traced in a loop
-    /// like ours, right after our single-thread run: the tighter comparison.
+    /// like ours, in its fast and its robust mode, right after our single-thread run: the
+    /// tighter comparison.
     pub library: Option<crate::embree::Embree>,
 }
 
@@ -356,14 +366,16 @@ pub fn ray_bench(
     };
     let mut reports = Vec::new();
     let mut embree_build = None;
-    let mut lib_build: Option<f64> = None;
     for (name, batch) in sets {
         // Ours and Embree alternate, run by run, so that both see the same share of whatever
         // else loads the machine; the best run of each is reported.
         let (mut ours_mt, mut ours_1t, mut hits) = (0.0f64, 0.0f64, 0);
         let mut embree_1t: Option<f64> = None;
         let mut pair_ratios = Vec::new();
-        let (mut lib_1t, mut lib_ratios, mut lib_disagree): (Option<f64>, Vec<f64>, Option<f64>) = (None, Vec::new(), None);
+        // Per Embree mode in this process (fast, robust): best rate, pair ratios, hit/miss
+        // disagreement, best build.
+        let mut lib: [(f64, Vec<f64>, Option<f64>, f64); 2] =
+            [(0.0, Vec::new(), None, f64::INFINITY), (0.0, Vec::new(), None, f64::INFINITY)];
         for rep in 0..repeats.max(1) {
             if rep > 0 {
                 // A BVH of its own each time, as Embree builds its scene anew in each run (a
@@ -377,26 +389,28 @@ pub fn ray_bench(
             hits = h;
             let one = rate(&accel, &pool_1t, batch, true).0;
             ours_1t = ours_1t.max(one);
-            if let Some(lib) = embree.and_then(|e| e.library.as_ref()) {
-                // A scene of its own each run, as our BVH is rebuilt; traced on this thread.
-                let t0 = Instant::now();
-                let scene = lib.scene(mesh, embree.is_some_and(|e| e.robust)).map_err(|e| Error::Invalid(e.to_string()))?;
-                lib_build = Some(lib_build.unwrap_or(f64::INFINITY).min(t0.elapsed().as_secs_f64()));
-                let (t0, c0) = (Instant::now(), thread_cpu_seconds());
-                let hits: Vec<Option<(u32, f32)>> =
-                    (0..batch.len()).map(|i| scene.intersect(batch.origins[i], batch.dirs[i], batch.tmax[i])).collect();
-                let wall = t0.elapsed().as_secs_f64();
-                let secs = match (c0, thread_cpu_seconds()) {
-                    (Some(a), Some(b)) if b > a => b - a,
-                    _ => wall,
-                };
-                let l_rate = batch.len() as f64 / secs;
-                lib_ratios.push(one / l_rate);
-                lib_1t = Some(lib_1t.unwrap_or(0.0).max(l_rate));
-                if lib_disagree.is_none() {
-                    let ours = trace_one_at_a_time(&accel, batch);
-                    let differ = ours.iter().zip(&hits).filter(|(a, b)| a.is_some() != b.is_some()).count();
-                    lib_disagree = Some(differ as f64 / batch.len().max(1) as f64);
+            if let Some(embree_lib) = embree.and_then(|e| e.library.as_ref()) {
+                for (mode, fig) in lib.iter_mut().enumerate() {
+                    // A scene of its own each run, as our BVH is rebuilt; traced on this thread.
+                    let t0 = Instant::now();
+                    let scene = embree_lib.scene(mesh, mode == 1).map_err(|e| Error::Invalid(e.to_string()))?;
+                    fig.3 = fig.3.min(t0.elapsed().as_secs_f64());
+                    let (t0, c0) = (Instant::now(), thread_cpu_seconds());
+                    let hits: Vec<Option<(u32, f32)>> =
+                        (0..batch.len()).map(|i| scene.intersect(batch.origins[i], batch.dirs[i], batch.tmax[i])).collect();
+                    let wall = t0.elapsed().as_secs_f64();
+                    let secs = match (c0, thread_cpu_seconds()) {
+                        (Some(a), Some(b)) if b > a => b - a,
+                        _ => wall,
+                    };
+                    let l_rate = batch.len() as f64 / secs;
+                    fig.1.push(one / l_rate);
+                    fig.0 = fig.0.max(l_rate);
+                    if fig.2.is_none() {
+                        let ours = trace_one_at_a_time(&accel, batch);
+                        let differ = ours.iter().zip(&hits).filter(|(a, b)| a.is_some() != b.is_some()).count();
+                        fig.2 = Some(differ as f64 / batch.len().max(1) as f64);
+                    }
                 }
             }
             if let Some(e) = embree {
@@ -416,9 +430,19 @@ pub fn ray_bench(
             ours_1t,
             embree_1t,
             pair_ratio_median: median(&pair_ratios),
-            embree_lib_1t: lib_1t,
-            lib_pair_ratio_median: median(&lib_ratios),
-            lib_hit_disagreement: lib_disagree,
+            in_process: lib
+                .iter()
+                .enumerate()
+                .filter_map(|(mode, (best, ratios, disagree, build))| {
+                    Some(InProcessFigures {
+                        robust: mode == 1,
+                        best_1t: *best,
+                        pair_ratio_median: median(ratios)?,
+                        hit_disagreement: disagree.unwrap_or(0.0),
+                        build_seconds: *build,
+                    })
+                })
+                .collect(),
         });
     }
     Ok(RayBenchReport {
@@ -427,7 +451,6 @@ pub fn ray_bench(
         build_seconds,
         bvh_nodes,
         embree_build_seconds: embree_build,
-        embree_lib_build_seconds: lib_build,
         sets: reports,
     })
 }
@@ -453,8 +476,13 @@ impl fmt::Display for RayBenchReport {
         if let Some(b) = self.embree_build_seconds {
             writeln!(f, "  Embree scene build {:.1} ms (embreex default: TBB threads)", b * 1e3)?;
         }
-        if let Some(b) = self.embree_lib_build_seconds {
-            writeln!(f, "  Embree scene build in this process {:.1} ms (TBB threads)", b * 1e3)?;
+        for p in self.sets.first().map_or(&[][..], |s| &s.in_process[..]) {
+            writeln!(
+                f,
+                "  Embree scene build in this process, {} mode: {:.1} ms (TBB threads)",
+                if p.robust { "robust" } else { "fast" },
+                p.build_seconds * 1e3
+            )?;
         }
         for s in &self.sets {
             write!(
@@ -482,14 +510,16 @@ impl fmt::Display for RayBenchReport {
                 }
             }
             writeln!(f)?;
-            if let (Some(l), Some(m)) = (s.embree_lib_1t, s.lib_pair_ratio_median) {
+            for p in &s.in_process {
                 writeln!(
                     f,
-                    "  {:<8} Embree in this process {:>6.2} Mrays/s (1t): ours/Embree 1t {:.2}x, median of the run-by-run ratios {m:.2}x; hit/miss differs on {:.4}% of rays",
+                    "  {:<8} Embree in this process, {:<6} {:>6.2} Mrays/s (1t): ours/Embree 1t {:.2}x, median of the run-by-run ratios {:.2}x; hit/miss differs on {:.4}% of rays",
                     "",
-                    l * 1e-6,
-                    s.ours_1t / l,
-                    s.lib_hit_disagreement.unwrap_or(0.0) * 100.0
+                    if p.robust { "robust" } else { "fast" },
+                    p.best_1t * 1e-6,
+                    s.ours_1t / p.best_1t,
+                    p.pair_ratio_median,
+                    p.hit_disagreement * 100.0
                 )?;
             }
         }

@@ -127,6 +127,15 @@ fn sym<T: Copy>(lib: &libloading::Library, path: &Path, name: &'static str) -> R
 impl Embree {
     /// Loads the library at `path` and creates a device (`rtcNewDevice(NULL)`).
     pub fn load(path: &Path) -> Result<Embree, EmbreeError> {
+        Embree::load_with_config(path, None)
+    }
+
+    /// `load` with an Embree device configuration string (`rtcNewDevice`'s, e.g. `isa=avx2` to
+    /// keep Embree to its AVX2 kernels on a CPU that has AVX-512).
+    pub fn load_with_config(path: &Path, config: Option<&str>) -> Result<Embree, EmbreeError> {
+        let config = config
+            .map(|c| std::ffi::CString::new(c).map_err(|_| EmbreeError::Call { stage: "rtcNewDevice (configuration has a NUL)", code: -1 }))
+            .transpose()?;
         // SAFETY: loading runs the library's initialisers (Embree's and TBB's), which have no
         // preconditions.
         let lib = unsafe { libloading::Library::new(path) }
@@ -146,8 +155,9 @@ impl Embree {
             release_geometry: sym(&lib, path, "rtcReleaseGeometry")?,
             intersect1: sym(&lib, path, "rtcIntersect1")?,
         };
-        // SAFETY: a null configuration string is Embree's default configuration.
-        let device = unsafe { (api.new_device)(std::ptr::null()) };
+        // SAFETY: a null configuration string is Embree's default configuration; otherwise a
+        // NUL-terminated string that lives across the call.
+        let device = unsafe { (api.new_device)(config.as_ref().map_or(std::ptr::null(), |c| c.as_ptr())) };
         let embree = Embree { api, device, path: path.to_path_buf(), _lib: ManuallyDrop::new(lib) };
         if device.is_null() {
             return Err(EmbreeError::Call { stage: "rtcNewDevice", code: -1 });
