@@ -1,7 +1,9 @@
 //! Ray-tracing benchmark: BVH build time and closest-hit rays/s on camera rays and on random
-//! rays, next to Embree's rays/s on the very same rays (through the embreex Python binding and
-//! `tools/embree/trace.py`). Also the plumbing the Embree cross-check test uses. The venv that
-//! holds the binding is built outside this library, by the `tools-venv` crate (tools/venv/).
+//! rays, next to Embree's rays/s on the very same rays: through the embreex Python binding and
+//! `tools/embree/trace.py` in another process, and through the same library loaded into this one
+//! (`crate::embree`), in its fast and its robust mode. Also the plumbing the Embree cross-check
+//! test uses. The venv that holds the binding is built outside this library, by the
+//! `tools-venv` crate (tools/venv/).
 
 use crate::geometry::{Accel, Hit, Mesh};
 use crate::math::Ray;
@@ -325,9 +327,11 @@ pub struct EmbreeSetup {
 }
 
 /// Builds the BVH of `mesh` (timed; the best of three builds), then traces each ray set with
-/// `threads` threads, with one, and with Embree if `embree` is given, alternating run by run
-/// (best of `repeats` runs each; our BVH is built anew, untimed, for every run after the
-/// first). Rays/s count closest-hit queries only; see `RaySetReport` for the clocks.
+/// `threads` threads, with one, and with Embree if `embree` is given (in this process right
+/// after our single-thread run, fast then robust mode, where `EmbreeSetup::library` is loaded;
+/// then through embreex), alternating run by run (best of `repeats` runs each; our BVH is built
+/// anew, untimed, for every run after the first, and so is each in-process Embree scene, whose
+/// build is timed apart). Rays/s count closest-hit queries only; see `RaySetReport` for the clocks.
 pub fn ray_bench(
     mesh: &Mesh,
     sets: &[(&str, &RayBatch)],
