@@ -1,7 +1,8 @@
 //! A/B of BVH variants in one process, single-thread, interleaved run by run (best and median
 //! of `REPS` runs, per CPU second of the tracing thread), with node visits and block tests per
 //! ray. Each variant is a node cost for the wide collapse (`Accel::build_tuned`), optionally
-//! followed by `:sse2` to force the SSE2 node test, `:tri4` for the AVX2 node test with leaves
+//! followed by `:sse2` to force the SSE2 node test, `:avx2` for the AVX2 query without AVX-512's
+//! registers where the CPU has them, `:tri4` for the AVX2 node test with leaves
 //! tested one `Tri4` block at a time (`:` for the default) and by an obvhs build
 //! preset (`:fast`, `:medium`, `:slow`; `very_fast` by default), e.g.
 //! `REPS=7 cargo run --release -p renderer --example bvh_ab -- 3:sse2 3 4 3::slow`. Rays are
@@ -54,6 +55,9 @@ fn main() {
                 let mut a = Accel::build_tuned(&mesh, params, c.parse().expect("variant: a node cost"));
                 a.set_avx2(isa != "sse2");
                 a.set_tri8(isa != "tri4");
+                if isa == "avx2" {
+                    a.set_avx512(false);
+                }
                 Some(a)
             })
             .collect();

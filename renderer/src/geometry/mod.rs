@@ -113,6 +113,11 @@ impl Accel {
         self.bvh.set_avx2(enable)
     }
 
+    /// Whether the AVX2 query is compiled with AVX-512 registers too (see [`bvh::Bvh::set_avx512`]).
+    pub fn set_avx512(&mut self, enable: bool) -> bool {
+        self.bvh.set_avx512(enable)
+    }
+
     /// Whether AVX2 traversal tests leaves two blocks at a time (see [`bvh::Bvh::set_tri8`]).
     pub fn set_tri8(&mut self, enable: bool) -> bool {
         self.bvh.set_tri8(enable)

@@ -331,11 +331,16 @@ fn avx2_and_sse2_node_tests_agree() {
             eprintln!("this CPU has no AVX2 and FMA: only the SSE2 node test ran");
             return;
         }
-        for tri8 in [true, false] {
-            accel.set_tri8(tri8);
-            let avx2 = run(&accel);
-            for (i, (a, b)) in sse2.iter().zip(&avx2).enumerate() {
-                assert_eq!(a, b, "tri8 {tri8}, ray {i}: {:?} tmax {}", batch.ray(i), batch.tmax[i]);
+        // With AVX-512 where the CPU has it (the same query, more registers), and without.
+        let with_512 = accel.set_avx512(true);
+        for avx512 in if with_512 { vec![true, false] } else { vec![false] } {
+            accel.set_avx512(avx512);
+            for tri8 in [true, false] {
+                accel.set_tri8(tri8);
+                let avx2 = run(&accel);
+                for (i, (a, b)) in sse2.iter().zip(&avx2).enumerate() {
+                    assert_eq!(a, b, "avx512 {avx512}, tri8 {tri8}, ray {i}: {:?} tmax {}", batch.ray(i), batch.tmax[i]);
+                }
             }
         }
     }
