@@ -417,7 +417,7 @@ impl Bvh {
     /// `query_avx2` compiled for a CPU that also has AVX-512 (F and VL): the same 256-bit
     /// operations, so the same results bit for bit, but LLVM gets 32 vector registers instead of
     /// 16 (the two-block leaf test spilled to the stack with 16) and compares into mask
-    /// registers. 3 % faster on the displaced sphere (docs/performance.md).
+    /// registers. 2–5 % faster in the ray benchmark (docs/performance.md).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
     fn query_avx512<const ANY: bool>(
