@@ -109,7 +109,9 @@ fn in_process_embree_matches_embreex() {
     let lib_path = renderer::embree::library_in_venv(&venv).unwrap_or_else(|e| panic!("{e}"));
     let embree = renderer::embree::Embree::load(&lib_path).unwrap_or_else(|e| panic!("{e}"));
     let script = embree_script(&workspace());
-    let work = workspace().join("target/embree-crosscheck");
+    // Its own exchange folder: the helper's file names carry the process id and the batch size,
+    // which this test shares with the one above when both run at once.
+    let work = workspace().join("target/embree-crosscheck-in-process");
     let meshes = [
         ("stanford-bunny", load_obj("scenes/assets/stanford-bunny/bunny.obj")),
         ("displaced-sphere", displaced_sphere(230, 230, SphereStyle::Bench)),
