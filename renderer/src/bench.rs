@@ -353,20 +353,19 @@ pub fn ray_bench(
     }
     let mut accel = accel.expect("built three times");
     let bvh_nodes = accel.node_count();
-    // Rays/s and hit count; with `cpu`, on one thread (a loop on the pool's one thread) and
-    // per CPU second of that thread, else on the pool's threads and per wall-clock second.
+    // Rays/s and hits; with `cpu`, on one thread (a loop on the pool's one thread) and per CPU
+    // second of that thread, else on the pool's threads and per wall-clock second.
     let rate = |accel: &Accel, p: &rayon::ThreadPool, batch: &RayBatch, cpu: bool| {
         let (s, r) = p.install(|| {
-            let (t0, c0) = (Instant::now(), thread_cpu_seconds());
-            let r: Vec<Option<Hit>> = if cpu { trace_one_at_a_time(accel, batch) } else { trace(accel, batch, 0) };
-            let wall = t0.elapsed().as_secs_f64();
-            let s = match (cpu, c0, thread_cpu_seconds()) {
-                (true, Some(a), Some(b)) if b > a => b - a,
-                _ => wall,
-            };
-            (s, r)
+            if cpu {
+                seconds_on_this_thread(|| trace_one_at_a_time(accel, batch))
+            } else {
+                let t0 = Instant::now();
+                let r = trace(accel, batch, 0);
+                (t0.elapsed().as_secs_f64(), r)
+            }
         });
-        (batch.len() as f64 / s, r.iter().filter(|h| h.is_some()).count())
+        (batch.len() as f64 / s, r)
     };
     let mut reports = Vec::new();
     let mut embree_build = None;
@@ -376,10 +375,8 @@ pub fn ray_bench(
         let (mut ours_mt, mut ours_1t, mut hits) = (0.0f64, 0.0f64, 0);
         let mut embree_1t: Option<f64> = None;
         let mut pair_ratios = Vec::new();
-        // Per Embree mode in this process (fast, robust): best rate, pair ratios, hit/miss
-        // disagreement, best build.
-        let mut lib: [(f64, Vec<f64>, Option<f64>, f64); 2] =
-            [(0.0, Vec::new(), None, f64::INFINITY), (0.0, Vec::new(), None, f64::INFINITY)];
+        // Embree in this process: fast mode, robust mode.
+        let mut lib = [InProcessRuns::new(false), InProcessRuns::new(true)];
         for rep in 0..repeats.max(1) {
             if rep > 0 {
                 // A BVH of its own each time, as Embree builds its scene anew in each run (a
@@ -390,31 +387,23 @@ pub fn ray_bench(
             }
             let (r, h) = rate(&accel, &pool_mt, batch, false);
             ours_mt = ours_mt.max(r);
-            hits = h;
-            let one = rate(&accel, &pool_1t, batch, true).0;
+            hits = h.iter().filter(|h| h.is_some()).count();
+            let (one, ours_hits) = rate(&accel, &pool_1t, batch, true);
             ours_1t = ours_1t.max(one);
             if let Some(embree_lib) = embree.and_then(|e| e.library.as_ref()) {
-                for (mode, fig) in lib.iter_mut().enumerate() {
+                for runs in &mut lib {
                     // A scene of its own each run, as our BVH is rebuilt; traced on this thread.
                     let t0 = Instant::now();
-                    let scene = embree_lib.scene(mesh, mode == 1).map_err(|e| Error::Invalid(e.to_string()))?;
-                    fig.3 = fig.3.min(t0.elapsed().as_secs_f64());
-                    let (t0, c0) = (Instant::now(), thread_cpu_seconds());
-                    let hits: Vec<Option<(u32, f32)>> =
-                        (0..batch.len()).map(|i| scene.intersect(batch.origins[i], batch.dirs[i], batch.tmax[i])).collect();
-                    let wall = t0.elapsed().as_secs_f64();
-                    let secs = match (c0, thread_cpu_seconds()) {
-                        (Some(a), Some(b)) if b > a => b - a,
-                        _ => wall,
-                    };
-                    let l_rate = batch.len() as f64 / secs;
-                    fig.1.push(one / l_rate);
-                    fig.0 = fig.0.max(l_rate);
-                    if fig.2.is_none() {
-                        let ours = trace_one_at_a_time(&accel, batch);
-                        let differ = ours.iter().zip(&hits).filter(|(a, b)| a.is_some() != b.is_some()).count();
-                        fig.2 = Some(differ as f64 / batch.len().max(1) as f64);
-                    }
+                    let scene = embree_lib.scene(mesh, runs.robust).map_err(|e| Error::Invalid(e.to_string()))?;
+                    runs.build = runs.build.min(t0.elapsed().as_secs_f64());
+                    let (secs, theirs) = seconds_on_this_thread(|| {
+                        (0..batch.len()).map(|i| scene.intersect(batch.origins[i], batch.dirs[i], batch.tmax[i])).collect::<Vec<_>>()
+                    });
+                    let their_rate = batch.len() as f64 / secs;
+                    runs.ratios.push(one / their_rate);
+                    runs.best = runs.best.max(their_rate);
+                    let differ = ours_hits.iter().zip(&theirs).filter(|(a, b)| a.is_some() != b.is_some()).count();
+                    runs.disagreement = differ as f64 / batch.len().max(1) as f64;
                 }
             }
             if let Some(e) = embree {
@@ -434,19 +423,7 @@ pub fn ray_bench(
             ours_1t,
             embree_1t,
             pair_ratio_median: median(&pair_ratios),
-            in_process: lib
-                .iter()
-                .enumerate()
-                .filter_map(|(mode, (best, ratios, disagree, build))| {
-                    Some(InProcessFigures {
-                        robust: mode == 1,
-                        best_1t: *best,
-                        pair_ratio_median: median(ratios)?,
-                        hit_disagreement: disagree.unwrap_or(0.0),
-                        build_seconds: *build,
-                    })
-                })
-                .collect(),
+            in_process: lib.iter().filter_map(InProcessRuns::figures).collect(),
         });
     }
     Ok(RayBenchReport {
@@ -457,6 +434,45 @@ pub fn ray_bench(
         embree_build_seconds: embree_build,
         sets: reports,
     })
+}
+
+/// What the runs of Embree in this process in one mode gave so far.
+struct InProcessRuns {
+    robust: bool,
+    best: f64,
+    ratios: Vec<f64>,
+    disagreement: f64,
+    build: f64,
+}
+
+impl InProcessRuns {
+    fn new(robust: bool) -> InProcessRuns {
+        InProcessRuns { robust, best: 0.0, ratios: Vec::new(), disagreement: 0.0, build: f64::INFINITY }
+    }
+
+    /// `None` where no run was made.
+    fn figures(&self) -> Option<InProcessFigures> {
+        Some(InProcessFigures {
+            robust: self.robust,
+            best_1t: self.best,
+            pair_ratio_median: median(&self.ratios)?,
+            hit_disagreement: self.disagreement,
+            build_seconds: self.build,
+        })
+    }
+}
+
+/// Runs `f` on the calling thread and returns the seconds it took with its result: CPU seconds
+/// of this thread where Linux tells them (other processes taking the CPU do not count), else
+/// wall clock.
+fn seconds_on_this_thread<R>(f: impl FnOnce() -> R) -> (f64, R) {
+    let (t0, c0) = (Instant::now(), thread_cpu_seconds());
+    let r = f();
+    let wall = t0.elapsed().as_secs_f64();
+    match (c0, thread_cpu_seconds()) {
+        (Some(a), Some(b)) if b > a => (b - a, r),
+        _ => (wall, r),
+    }
 }
 
 /// Median (mean of the two middle values for an even count); `None` for no values.
