@@ -4,11 +4,10 @@
 //! bounce is three stages:
 //!
 //! 1. per path (scalar): the closest-hit query, surface geometry, emission found by the path,
-//!    the BSDF's albedo, the random numbers, the light selection and the concentric disk map
-//!    (whose `sincosf` stays libm's);
+//!    the BSDF's albedo, the random numbers and the light selection;
 //! 2. all lanes at once, branch-free: normal orientation, shading frame, the light point, the
-//!    connection, the BSDF value and densities, the MIS weight, the shadow ray, the BSDF sample,
-//!    the new throughput and the next ray. Written as loops over the lanes that LLVM
+//!    connection, the BSDF value and densities, the MIS weight, the shadow ray, the BSDF sample
+//!    (its concentric disk map included), the new throughput and the next ray. Written as loops over the lanes that LLVM
 //!    vectorises, compiled for AVX2 + FMA when the CPU has them (chosen at run time) and for
 //!    the SSE2 baseline otherwise;
 //! 3. per path (scalar): the shadow query, its contribution, Russian roulette.
@@ -89,7 +88,7 @@ struct Wave {
     ns: V3,
     albedo: V3,
     u_light: [Vec2; LANES],
-    disk: [Vec2; LANES],
+    u_bsdf: [Vec2; LANES],
     has_light: B,
     lp0: V3,
     lp1: V3,
@@ -220,7 +219,7 @@ fn stage_hit(scene: &Scene, w: &mut Wave, rngs: &mut [Pcg32], out: &mut [LaneRes
         let _u_lobe = rng.next_f32();
         let u_bsdf = rng.next_2d();
         // `Bsdf::sample`'s input checks: the draws are always finite, so only `wo` is left (stage 2).
-        w.disk[i] = crate::sampling::square_to_disk_concentric(u_bsdf);
+        w.u_bsdf[i] = u_bsdf;
         if let Some((light, pmf)) = scene.lights.select_triangle(u_select) {
             w.has_light[i] = true;
             w.lp0.set(i, light.vertices[0]);
@@ -292,7 +291,7 @@ fn stage_shade(w: &mut Wave) {
         w.add_s.set(i, add_s);
 
         // BSDF sampling (`Bsdf::sample` → `lambert::sample`), then `trace`'s checks.
-        let d = w.disk[i];
+        let d = crate::sampling::square_to_disk_concentric(w.u_bsdf[i]);
         let s_wi = Vec3::new(d.x, d.y, (1.0 - d.length_squared()).max(0.0).sqrt());
         let s_pdf = s_wi.z * INV_PI;
         let s_weight = albedo;
