@@ -1,0 +1,217 @@
+//! The AVX2 and FMA paths of the BVH query, chosen at run time: the eight children of a node
+//! tested in one 256-bit operation and leaves two `Tri4` blocks at a time, with exactly the SSE2
+//! paths' floating-point operations (so the same hits bit for bit).
+
+use super::tri4::tri4_test;
+use super::{HitRec, Node, NodeTest, Probe, RayData, Tri4, ANY_HIT, SLAB_WIDEN, W};
+use std::arch::x86_64::*;
+
+/// Proof that this CPU has AVX2 and FMA: only `detect` makes one. `tri8`: leaves are
+/// tested two `Tri4` blocks at a time (`tri8_test`), else one at a time. `avx512`: the CPU
+/// also has AVX-512 F and VL, and queries run as `Bvh::query_avx512`.
+#[derive(Clone, Copy)]
+pub(super) struct Avx2 {
+    pub(super) tri8: bool,
+    pub(super) avx512: bool,
+}
+
+impl Avx2 {
+    pub(super) fn detect() -> Option<Avx2> {
+        (is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"))
+            .then(|| Avx2 { tri8: true, avx512: is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("avx512vl") })
+    }
+}
+
+impl NodeTest for Avx2 {
+    /// `super::node_test` with all eight children in one 256-bit register: the same
+    /// operations in the same order (max and min take their operands as glam's do), so the
+    /// mask and distances are bit-identical and the conservative widening is unchanged.
+    /// Not a `#[target_feature]` function itself, which Rust may not inline: it is inlined
+    /// into `Bvh::query_avx2`, which has the features, and only compiled there.
+    #[inline(always)]
+    fn node_test(self, node: &Node, r: &RayData, tmax: f32) -> (u32, [f32; W]) {
+        let mut tnear = [0.0f32; W];
+        // SAFETY: `self` exists only where `detect` found AVX2 and FMA on this CPU; the
+        // loads read one plane (8 floats, `plane`) and the store writes `tnear` (8 floats).
+        let mask = unsafe {
+            let plane = |p: usize| _mm256_loadu_ps(plane(&node.b[p]).as_ptr());
+            let t =
+                |p: usize, axis: usize| _mm256_mul_ps(_mm256_sub_ps(plane(p), _mm256_set1_ps(r.o[axis].x)), _mm256_set1_ps(r.inv[axis].x));
+            let lo = _mm256_set1_ps(1.0 - SLAB_WIDEN);
+            let hi = _mm256_set1_ps(1.0 + SLAB_WIDEN);
+            let zero = _mm256_setzero_ps();
+            let tn = _mm256_max_ps(_mm256_max_ps(t(r.near[0], 0), t(r.near[1], 1)), _mm256_max_ps(t(r.near[2], 2), zero));
+            let tf = _mm256_min_ps(_mm256_min_ps(t(r.far[0], 0), t(r.far[1], 1)), _mm256_min_ps(t(r.far[2], 2), _mm256_set1_ps(tmax)));
+            let tn = _mm256_mul_ps(tn, lo);
+            let tf = _mm256_mul_ps(tf, hi);
+            _mm256_storeu_ps(tnear.as_mut_ptr(), tn);
+            _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32
+        };
+        (mask, tnear)
+    }
+
+    #[inline(always)]
+    fn leaf_test<const ANY: bool, P: Probe>(
+        self,
+        blocks: &[Tri4],
+        r: &RayData,
+        tmax: &mut f32,
+        best: &mut Option<HitRec>,
+        probe: &mut P,
+    ) -> bool {
+        if !self.tri8 {
+            return super::leaf_test_tri4::<ANY, P>(blocks, r, tmax, best, probe);
+        }
+        let mut pairs = blocks.chunks_exact(2);
+        for pair in &mut pairs {
+            probe.block();
+            probe.block();
+            // SAFETY: as in `node_test`.
+            if let Some(h) = unsafe { tri8_test::<ANY>(&pair[0], &pair[1], r, *tmax) } {
+                *tmax = h.0;
+                *best = Some(h);
+                if ANY {
+                    return true;
+                }
+            }
+        }
+        super::leaf_test_tri4::<ANY, P>(pairs.remainder(), r, tmax, best, probe)
+    }
+}
+
+/// `tri4_test(a)` and then `tri4_test(b)` against the closer `tmax` (with `ANY`: whether
+/// either has a hit, `ANY_HIT`), in one pass of 256-bit operations: lanes 0..4 are `a`'s triangles,
+/// 4..8 `b`'s, and every lane computes exactly `tri4_test`'s operations, so the result is
+/// bit-identical to the two `Tri4` tests (which remain the path where an edge function
+/// rounds to zero). The only order-dependent step of the sequence, `b` being tested
+/// against `a`'s hit distance, is redone for `b`'s lanes when `a` hits.
+///
+/// # Safety
+/// Only with AVX2 (an `Avx2` exists).
+#[inline(always)]
+unsafe fn tri8_test<const ANY: bool>(a: &Tri4, b: &Tri4, r: &RayData, tmax: f32) -> Option<HitRec> {
+    // SAFETY: the caller has checked AVX2; the loads read whole `Vec4`s of `a` and `b`
+    // and the stores write arrays of `W` floats.
+    unsafe {
+        let [kx, ky, kz] = r.k;
+        // Macros, not closures: a closure is a function of its own, compiled without
+        // `query_avx2`'s target features unless inlined (every intrinsic then a call).
+        macro_rules! splat {
+            ($v:expr) => {
+                _mm256_set1_ps($v.x)
+            };
+        }
+        let (ox, oy, oz) = (splat!(r.o[kx]), splat!(r.o[ky]), splat!(r.o[kz]));
+        let (sx, sy, sz) = (splat!(r.s[0]), splat!(r.s[1]), splat!(r.s[2]));
+        macro_rules! load {
+            ($vtx:expr, $axis:expr) => {
+                _mm256_set_m128(_mm_loadu_ps(b.v[$vtx][$axis].as_ref().as_ptr()), _mm_loadu_ps(a.v[$vtx][$axis].as_ref().as_ptr()))
+            };
+        }
+        macro_rules! sheared {
+            ($vtx:expr) => {{
+                let az = _mm256_sub_ps(load!($vtx, kz), oz);
+                let x = _mm256_sub_ps(_mm256_sub_ps(load!($vtx, kx), ox), _mm256_mul_ps(sx, az));
+                let y = _mm256_sub_ps(_mm256_sub_ps(load!($vtx, ky), oy), _mm256_mul_ps(sy, az));
+                (x, y, _mm256_mul_ps(sz, az))
+            }};
+        }
+        let (ax, ay, az) = sheared!(0);
+        let (bx, by, bz) = sheared!(1);
+        let (cx, cy, cz) = sheared!(2);
+        let u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+        let v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+        let w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+        let zero = _mm256_setzero_ps();
+        let eq0 = _mm256_or_ps(
+            _mm256_or_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(u, zero), _mm256_cmp_ps::<_CMP_EQ_OQ>(v, zero)),
+            _mm256_cmp_ps::<_CMP_EQ_OQ>(w, zero),
+        );
+        if _mm256_movemask_ps(eq0) != 0 {
+            let ha = tri4_test(a, r, tmax);
+            if ANY && ha.is_some() {
+                return ha;
+            }
+            let hb = tri4_test(b, r, ha.map_or(tmax, |h| h.0));
+            return hb.or(ha);
+        }
+        macro_rules! lt {
+            ($x:expr) => {
+                _mm256_cmp_ps::<_CMP_LT_OQ>($x, zero)
+            };
+        }
+        macro_rules! gt {
+            ($x:expr) => {
+                _mm256_cmp_ps::<_CMP_GT_OQ>($x, zero)
+            };
+        }
+        let neg = _mm256_or_ps(_mm256_or_ps(lt!(u), lt!(v)), lt!(w));
+        let pos = _mm256_or_ps(_mm256_or_ps(gt!(u), gt!(v)), gt!(w));
+        let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
+        let t_scaled = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(u, az), _mm256_mul_ps(v, bz)), _mm256_mul_ps(w, cz));
+        let sign = _mm256_set1_ps(-0.0);
+        let ts = _mm256_blendv_ps(t_scaled, _mm256_xor_ps(t_scaled, sign), lt!(det));
+        let dabs = _mm256_andnot_ps(sign, det);
+        let t = _mm256_div_ps(t_scaled, det);
+        macro_rules! in_range {
+            ($tm:expr) => {{
+                let tm = $tm;
+                _mm256_and_ps(
+                    _mm256_and_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(ts, _mm256_mul_ps(tm, dabs)), gt!(t)),
+                    _mm256_cmp_ps::<_CMP_LT_OQ>(t, tm),
+                )
+            }};
+        }
+        let ok = _mm256_andnot_ps(
+            _mm256_and_ps(neg, pos),
+            _mm256_and_ps(
+                _mm256_and_ps(gt!(dabs), _mm256_cmp_ps::<_CMP_LT_OQ>(dabs, _mm256_set1_ps(f32::INFINITY))),
+                _mm256_and_ps(gt!(ts), in_range!(_mm256_set1_ps(tmax))),
+            ),
+        );
+        let mut m = _mm256_movemask_ps(ok) as u32;
+        if m == 0 {
+            return None;
+        }
+        if ANY {
+            return Some(ANY_HIT);
+        }
+        let mut ta = [0.0f32; W];
+        _mm256_storeu_ps(ta.as_mut_ptr(), t);
+        let closest = |mut m: u32| {
+            let mut lane = m.trailing_zeros() as usize;
+            m &= m - 1;
+            while m != 0 {
+                let l = m.trailing_zeros() as usize;
+                m &= m - 1;
+                if ta[l] < ta[lane] {
+                    lane = l;
+                }
+            }
+            lane
+        };
+        if m & 0xf != 0 && m & 0xf0 != 0 {
+            // `b`'s lanes must also be in range of `a`'s hit, as when tested after it.
+            let ta_best = ta[closest(m & 0xf)];
+            m &= 0xf | _mm256_movemask_ps(in_range!(_mm256_set1_ps(ta_best))) as u32;
+        }
+        let lane = closest(m);
+        let mut da = [0.0f32; W];
+        let mut va = [0.0f32; W];
+        let mut wa = [0.0f32; W];
+        _mm256_storeu_ps(da.as_mut_ptr(), det);
+        _mm256_storeu_ps(va.as_mut_ptr(), v);
+        _mm256_storeu_ps(wa.as_mut_ptr(), w);
+        let inv = 1.0 / da[lane];
+        let id = if lane < 4 { a.id[lane] } else { b.id[lane - 4] };
+        Some((ta[lane], id, va[lane] * inv, wa[lane] * inv))
+    }
+}
+
+/// The eight floats of one plane of a node.
+#[inline(always)]
+fn plane(p: &[glam::Vec4; 2]) -> &[f32; W] {
+    // SAFETY: `Vec4` is four `f32`s without padding (`repr(C)` or a 16-byte SIMD type of
+    // the same layout), so `[Vec4; 2]` is exactly `[f32; 8]`, and f32's alignment is lower.
+    unsafe { &*(p as *const [glam::Vec4; 2] as *const [f32; W]) }
+}

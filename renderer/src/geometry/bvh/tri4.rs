@@ -1,0 +1,122 @@
+//! Leaf blocks of four triangles side by side (`Tri4`) and their test: Woop et al.'s watertight
+//! test (see `triangle.rs`) four lanes at a time with exactly the scalar version's
+//! floating-point operations, and the scalar test for a block in which an edge function
+//! rounds to zero.
+
+use super::{triangle, HitRec, RayData, ANY_HIT};
+use glam::{Vec3, Vec4};
+
+/// Four triangles side by side: `v[vertex][axis]`, lane i being triangle i. A leaf with fewer
+/// than four triangles repeats its last one (the duplicate finds the same hit).
+#[derive(Clone, Copy)]
+#[repr(C, align(16))]
+pub(super) struct Tri4 {
+    pub(super) v: [[Vec4; 3]; 3],
+    /// Original triangle index (into `Mesh::triangles`) of each lane.
+    pub(super) id: [u32; 4],
+}
+
+/// Closest of the four triangles of `blk` hit in (0, tmax): (t, triangle index, b1, b2).
+/// Exactly the floating-point operations of `triangle::intersect`, four lanes at a time.
+#[inline(always)]
+pub(super) fn tri4_test(blk: &Tri4, r: &RayData, tmax: f32) -> Option<HitRec> {
+    match tri4_fast::<false>(blk, r, tmax) {
+        Tri4Result::Miss => None,
+        Tri4Result::Hit(h) => Some(h),
+        Tri4Result::EdgeZero => tri4_scalar(blk, r, tmax),
+    }
+}
+
+/// What the vector part of `tri4_test` found.
+pub(super) enum Tri4Result {
+    Miss,
+    Hit(HitRec),
+    /// An edge function rounded to zero: the ray passes (numerically) through an edge or
+    /// vertex; the scalar test (`tri4_scalar`) resolves it exactly, consistently with the
+    /// neighbour.
+    EdgeZero,
+}
+
+/// `tri4_test` without its scalar fallback. Kept apart so that a caller handles the two
+/// outcomes on separate paths: merged with the out-of-line fallback's result (returned through
+/// memory), the hit record was assembled in memory by four scalar stores and reloaded at once
+/// by `*best = Some(h)`, a failed store-to-load forward on every leaf hit.
+///
+/// With `ANY` a hit is `ANY_HIT`: an any-hit query only asks whether there is one, so the
+/// closest lane, its division and its barycentrics are skipped.
+#[inline(always)]
+pub(super) fn tri4_fast<const ANY: bool>(blk: &Tri4, r: &RayData, tmax: f32) -> Tri4Result {
+    let [kx, ky, kz] = r.k;
+    let [sx, sy, sz] = r.s;
+    let sheared = |v: &[Vec4; 3]| {
+        let az = v[kz] - r.o[kz];
+        (v[kx] - r.o[kx] - sx * az, v[ky] - r.o[ky] - sy * az, sz * az)
+    };
+    let (ax, ay, az) = sheared(&blk.v[0]);
+    let (bx, by, bz) = sheared(&blk.v[1]);
+    let (cx, cy, cz) = sheared(&blk.v[2]);
+    let u = cx * by - cy * bx;
+    let v = ax * cy - ay * cx;
+    let w = bx * ay - by * ax;
+    let zero = Vec4::ZERO;
+    if (u.cmpeq(zero) | v.cmpeq(zero) | w.cmpeq(zero)).any() {
+        return Tri4Result::EdgeZero;
+    }
+    let neg = u.cmplt(zero) | v.cmplt(zero) | w.cmplt(zero);
+    let pos = u.cmpgt(zero) | v.cmpgt(zero) | w.cmpgt(zero);
+    let det = u + v + w;
+    let t_scaled = u * az + v * bz + w * cz;
+    let flip = det.cmplt(zero);
+    let ts = Vec4::select(flip, -t_scaled, t_scaled);
+    let dabs = det.abs();
+    let t = t_scaled / det;
+    let tmax4 = Vec4::splat(tmax);
+    let ok = !(neg & pos)
+        & dabs.cmpgt(zero)
+        & dabs.cmplt(Vec4::INFINITY)
+        & ts.cmpgt(zero)
+        & ts.cmplt(tmax4 * dabs)
+        & t.cmpgt(zero)
+        & t.cmplt(tmax4);
+    let mut m = ok.bitmask();
+    if m == 0 {
+        return Tri4Result::Miss;
+    }
+    if ANY {
+        return Tri4Result::Hit(ANY_HIT);
+    }
+    let ta = t.to_array();
+    let mut lane = m.trailing_zeros() as usize;
+    m &= m - 1;
+    while m != 0 {
+        let l = m.trailing_zeros() as usize;
+        m &= m - 1;
+        if ta[l] < ta[lane] {
+            lane = l;
+        }
+    }
+    let inv = 1.0 / det.to_array()[lane];
+    Tri4Result::Hit((ta[lane], blk.id[lane], v.to_array()[lane] * inv, w.to_array()[lane] * inv))
+}
+
+/// `tri4_test` one lane at a time through the scalar watertight test (which recomputes edge
+/// functions that round to zero in f64).
+#[inline(never)]
+pub(super) fn tri4_scalar(blk: &Tri4, r: &RayData, mut tmax: f32) -> Option<HitRec> {
+    let [kx, ky, kz] = r.k;
+    let [sx, sy, sz] = r.ss;
+    let o = Vec3::new(r.o[0].x, r.o[1].x, r.o[2].x);
+    let mut best = None;
+    for lane in 0..4 {
+        let p = |vtx: usize| Vec3::new(blk.v[vtx][0][lane], blk.v[vtx][1][lane], blk.v[vtx][2][lane]) - o;
+        let sheared = |a: Vec3| {
+            let az = a[kz];
+            [a[kx] - sx * az, a[ky] - sy * az, sz * az]
+        };
+        if let Some((t, b1, b2)) = triangle::intersect_sheared(sheared(p(0)), sheared(p(1)), sheared(p(2)), tmax) {
+            tmax = t;
+            best = Some((t, blk.id[lane], b1, b2));
+        }
+    }
+    best
+}
