@@ -7,9 +7,9 @@
 //!    the BSDF's albedo, the random numbers and the light selection;
 //! 2. all lanes at once, branch-free: normal orientation, shading frame, the light point, the
 //!    connection, the BSDF value and densities, the MIS weight, the shadow ray, the BSDF sample
-//!    (its concentric disk map included), the new throughput and the next ray. Written as loops over the lanes that LLVM
-//!    vectorises, compiled for AVX2 + FMA when the CPU has them (chosen at run time) and for
-//!    the SSE2 baseline otherwise;
+//!    (its concentric disk map included), the new throughput and the next ray. Written as
+//!    loops over the lanes that LLVM vectorises, compiled for AVX2 + FMA when the CPU has them
+//!    (chosen at run time) and for the SSE2 baseline otherwise;
 //! 3. per path (scalar): the shadow query, its contribution, Russian roulette.
 //!
 //! Every path performs exactly `path::trace`'s floating-point operations in its order, with its
