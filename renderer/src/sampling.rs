@@ -6,9 +6,9 @@ use glam::{Vec2, Vec3};
 /// Concentric (Shirley–Chiu) map of the unit square to the unit disk.
 ///
 /// The angle is π/4 · q for |q| ≤ 1 in each octant pair, so its sine and cosine come from
-/// `sin_cos_quarter` rather than libm's `sincosf` (5–8 % of the Cornell box render's samples when it
-/// was a call per bounce); with selects instead of branches the wavefront's lane loops vectorise
-/// it. (The second octant pair's cos(π/2 − a), sin(π/2 − a) are sin a, cos a.)
+/// `sin_cos_quarter` rather than libm's `sincosf` (5–8 % of the Cornell box render's samples
+/// when it was a call per bounce); with selects instead of branches the wavefront's lane loops
+/// vectorise it. (The second octant pair's cos(π/2 − a), sin(π/2 − a) are sin a, cos a.)
 #[inline(always)]
 pub fn square_to_disk_concentric(u: Vec2) -> Vec2 {
     let o = 2.0 * u - Vec2::ONE;
