@@ -2,7 +2,7 @@
 //! tested in one 256-bit operation and leaves two `Tri4` blocks at a time, with exactly the SSE2
 //! paths' floating-point operations (so the same hits bit for bit).
 
-use super::tri4::tri4_test;
+use super::tri4::{closest_lane, tri4_test};
 use super::{HitRec, Node, NodeTest, Probe, RayData, Tri4, ANY_HIT, SLAB_WIDEN, W};
 use std::arch::x86_64::*;
 
@@ -178,24 +178,12 @@ unsafe fn tri8_test<const ANY: bool>(a: &Tri4, b: &Tri4, r: &RayData, tmax: f32)
         }
         let mut ta = [0.0f32; W];
         _mm256_storeu_ps(ta.as_mut_ptr(), t);
-        let closest = |mut m: u32| {
-            let mut lane = m.trailing_zeros() as usize;
-            m &= m - 1;
-            while m != 0 {
-                let l = m.trailing_zeros() as usize;
-                m &= m - 1;
-                if ta[l] < ta[lane] {
-                    lane = l;
-                }
-            }
-            lane
-        };
         if m & 0xf != 0 && m & 0xf0 != 0 {
             // `b`'s lanes must also be in range of `a`'s hit, as when tested after it.
-            let ta_best = ta[closest(m & 0xf)];
+            let ta_best = ta[closest_lane(&ta, m & 0xf)];
             m &= 0xf | _mm256_movemask_ps(in_range!(_mm256_set1_ps(ta_best))) as u32;
         }
-        let lane = closest(m);
+        let lane = closest_lane(&ta, m);
         let mut da = [0.0f32; W];
         let mut va = [0.0f32; W];
         let mut wa = [0.0f32; W];

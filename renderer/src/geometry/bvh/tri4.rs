@@ -78,7 +78,7 @@ pub(super) fn tri4_fast<const ANY: bool>(blk: &Tri4, r: &RayData, tmax: f32) -> 
         & ts.cmplt(tmax4 * dabs)
         & t.cmpgt(zero)
         & t.cmplt(tmax4);
-    let mut m = ok.bitmask();
+    let m = ok.bitmask();
     if m == 0 {
         return Tri4Result::Miss;
     }
@@ -86,17 +86,25 @@ pub(super) fn tri4_fast<const ANY: bool>(blk: &Tri4, r: &RayData, tmax: f32) -> 
         return Tri4Result::Hit(ANY_HIT);
     }
     let ta = t.to_array();
+    let lane = closest_lane(&ta, m);
+    let inv = 1.0 / det.to_array()[lane];
+    Tri4Result::Hit((ta[lane], blk.id[lane], v.to_array()[lane] * inv, w.to_array()[lane] * inv))
+}
+
+/// The lane set in `m` (bit i: lane i) with the smallest `t`; of equal ones the lowest, as
+/// when the lanes are tested one after another against a shrinking `tmax`.
+#[inline(always)]
+pub(super) fn closest_lane(t: &[f32], mut m: u32) -> usize {
     let mut lane = m.trailing_zeros() as usize;
     m &= m - 1;
     while m != 0 {
         let l = m.trailing_zeros() as usize;
         m &= m - 1;
-        if ta[l] < ta[lane] {
+        if t[l] < t[lane] {
             lane = l;
         }
     }
-    let inv = 1.0 / det.to_array()[lane];
-    Tri4Result::Hit((ta[lane], blk.id[lane], v.to_array()[lane] * inv, w.to_array()[lane] * inv))
+    lane
 }
 
 /// `tri4_test` one lane at a time through the scalar watertight test (which recomputes edge
