@@ -36,6 +36,8 @@ fn sin_cos_quarter(a: f32) -> (f32, f32) {
 }
 
 /// Cosine-weighted hemisphere around +Z; density `cos θ / π`.
+// Always inlined: called in the wavefront's vectorised lane loops (integrator/wave.rs).
+#[inline(always)]
 pub fn square_to_cosine_hemisphere(u: Vec2) -> Vec3 {
     let d = square_to_disk_concentric(u);
     let z = (1.0 - d.length_squared()).max(0.0).sqrt();

@@ -291,8 +291,7 @@ fn stage_shade(w: &mut Wave) {
         w.add_s.set(i, add_s);
 
         // BSDF sampling (`Bsdf::sample` → `lambert::sample`), then `trace`'s checks.
-        let d = crate::sampling::square_to_disk_concentric(w.u_bsdf[i]);
-        let s_wi = Vec3::new(d.x, d.y, (1.0 - d.length_squared()).max(0.0).sqrt());
+        let s_wi = crate::sampling::square_to_cosine_hemisphere(w.u_bsdf[i]);
         let s_pdf = s_wi.z * INV_PI;
         let s_weight = albedo;
         let s_fcos = albedo * s_pdf;
