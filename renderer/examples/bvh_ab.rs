@@ -10,6 +10,7 @@
 //! variant prefixed with `r` (`r5`), through `bench::trace`'s parallel iterator on the
 //! one-thread pool. The variant `e` is Embree in this process (`renderer::embree`, the library
 //! of `target/embree-venv`, fast mode; `er` its robust mode, `e2` kept to its AVX2 kernels), traced in the same kind of loop.
+//! `MESH=cornell` or `MESH=sphere` runs one of the two meshes.
 
 use renderer::bench::{displaced_sphere, thread_cpu_seconds, trace, trace_one_at_a_time, RayBatch, SphereStyle};
 use renderer::embree::{library_in_venv, Embree, EmbreeScene};
@@ -32,7 +33,11 @@ fn main() {
         })
     };
     let (embree, embree_avx2) = (lib(None), lib(Some("isa=avx2")));
+    let only = std::env::var("MESH").unwrap_or_default();
     for (name, mesh) in [("cornell", scene.mesh.clone()), ("sphere", displaced_sphere(230, 230, SphereStyle::Bench))] {
+        if !only.is_empty() && only != name {
+            continue;
+        }
         let cam = RayBatch::camera(&mesh, 500_000, 1);
         let rnd = RayBatch::random_in_bounds(&mesh, 500_000, 2);
         let accels: Vec<Option<Accel>> = variants
