@@ -25,12 +25,13 @@ mod tri4;
 
 use super::triangle;
 use collapse::Collapser;
-use glam::{Vec3, Vec4};
+use glam::{Vec3, Vec3A, Vec4};
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::ploc::PlocBuilder;
 use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
+use std::hint::select_unpredictable;
 use std::mem::MaybeUninit;
 use tri4::{tri4_fast, tri4_scalar, Tri4, Tri4Result};
 
@@ -134,18 +135,32 @@ struct RayData {
 impl RayData {
     #[inline(always)]
     fn new(o: Vec3, d: Vec3) -> Option<RayData> {
-        if !o.is_finite() || !d.is_finite() {
+        // 0·x is ±0 for a finite x and NaN otherwise: one test for all six components.
+        let (ov, dv) = (Vec3A::from(o), Vec3A::from(d));
+        if !(ov * 0.0 + dv * 0.0).cmpeq(Vec3A::ZERO).all() {
             return None;
         }
-        let k = triangle::shear_perm(d)?;
+        // `triangle::shear_perm`'s axes, with the permuted components picked by selects rather
+        // than read back at a computed index (a store and a reload on the way to the division),
+        // and `select_unpredictable`, as LLVM otherwise branches on the dominant axis, which
+        // varies from ray to ray after the first bounce.
+        let a = d.abs();
+        let (z0, z1) = ((a.x > a.y) & (a.x > a.z), !(a.x > a.y) & (a.y > a.z));
+        let (dkx, dky, dkz) = select_unpredictable(z0, (d.y, d.z, d.x), select_unpredictable(z1, (d.z, d.x, d.y), (d.x, d.y, d.z)));
+        if dkz == 0.0 {
+            return None;
+        }
+        let kz = 2 - z1 as usize - 2 * z0 as usize;
+        let (kx, ky) = ((kz + 1) % 3, (kz + 2) % 3);
+        let flip = dkz < 0.0;
+        let k = select_unpredictable(flip, [ky, kx, kz], [kx, ky, kz]);
         let clamp = |x: f32| if x.abs() < MIN_DIR { MIN_DIR.copysign(x) } else { x };
         // The three reciprocals and the shear's 1/d[kz] in one division (each lane rounds as
         // the scalar division would): four scalar divisions were a latency chain at the start
         // of every query.
-        // (`d` as an array for the computed axes: see `triangle::shear_perm`.)
-        let da = d.to_array();
-        let [ix, iy, iz, sz] = (Vec4::ONE / Vec4::new(clamp(d.x), clamp(d.y), clamp(d.z), da[k[2]])).to_array();
-        let (sx, sy) = (da[k[0]] * sz, da[k[1]] * sz);
+        let [ix, iy, iz, sz] = (Vec4::ONE / Vec4::new(clamp(d.x), clamp(d.y), clamp(d.z), dkz)).to_array();
+        let (dkx, dky) = select_unpredictable(flip, (dky, dkx), (dkx, dky));
+        let (sx, sy) = (dkx * sz, dky * sz);
         let near = |i: usize| if d[i] < 0.0 { 3 + i } else { i };
         Some(RayData {
             o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
@@ -623,6 +638,38 @@ fn node_test(node: &Node, r: &RayData, tmax: f32) -> (u32, [f32; W]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `RayData::new` picks its shear by selects; it must be `triangle::shear_axes`'s exactly
+    /// (axes and factors bit for bit, the same rays refused), or the BVH's triangle test would
+    /// disagree with the scalar one. Directions with tied magnitudes, zeros and every sign
+    /// pattern, which decide the dominant axis and the swap, plus random ones.
+    #[test]
+    fn ray_shear_matches_triangle_shear_axes() {
+        let vals = [0.0f32, -0.0, 1.0, -1.0, 0.5, -0.5, 2.0, -2.0, 1e-30, -3e38];
+        let mut dirs = Vec::new();
+        for &x in &vals {
+            for &y in &vals {
+                for &z in &vals {
+                    dirs.push(Vec3::new(x, y, z));
+                }
+            }
+        }
+        let mut rng = crate::rng::Pcg32::new(9, 0);
+        for _ in 0..10_000 {
+            dirs.push(Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5));
+        }
+        let mut checked = 0;
+        for d in dirs {
+            let want = triangle::shear_axes(d);
+            let got = RayData::new(Vec3::new(0.25, -1.0, 3.0), d);
+            assert_eq!(want.is_some(), got.is_some(), "direction {d:?}");
+            let (Some((k, s)), Some(r)) = (want, got) else { continue };
+            assert_eq!(k, r.k, "axes of {d:?}");
+            assert_eq!(s.map(f32::to_bits), r.ss.map(f32::to_bits), "factors of {d:?}");
+            checked += 1;
+        }
+        assert!(checked > 10_000, "only {checked} directions had a shear");
+    }
 
     /// The heap stack (for trees deeper than `STACK` allows) gives the same answers as the
     /// fixed one, and a mesh of nested triangles at scales 1 … 2^-40 (a deep binary tree)

@@ -47,7 +47,8 @@ impl RayShear {
 /// factors `[sx, sy, sz]` (`sz = 1/dir[kz]`, `sx = dir[kx]·sz`, `sy = dir[ky]·sz`). kz is the
 /// dominant axis; kx and ky are the others, swapped for a negative dominant component so the
 /// winding (and thus the sign of the edge functions) is preserved. `None` for a zero
-/// direction. Both this file's `RayShear` and the BVH's four-wide test shear with it.
+/// direction. This file's `RayShear` shears with it; the BVH's `RayData::new` computes the same
+/// axes and factors by selects (a test there holds them equal bit for bit).
 #[inline(always)]
 pub fn shear_axes(dir: Vec3) -> Option<([usize; 3], [f32; 3])> {
     let [kx, ky, kz] = shear_perm(dir)?;
@@ -56,10 +57,9 @@ pub fn shear_axes(dir: Vec3) -> Option<([usize; 3], [f32; 3])> {
     Some(([kx, ky, kz], [d[kx] * sz, d[ky] * sz, sz]))
 }
 
-/// The axes `[kx, ky, kz]` of `shear_axes`, for a caller that computes `sz` itself (the BVH
-/// divides it together with the box test's reciprocals, in one vector division).
+/// The axes `[kx, ky, kz]` of `shear_axes`.
 #[inline(always)]
-pub fn shear_perm(dir: Vec3) -> Option<[usize; 3]> {
+fn shear_perm(dir: Vec3) -> Option<[usize; 3]> {
     // Arrays, not `Vec3`'s `Index` (a `match` on the axis): indexed by a computed axis, that
     // compiled to compare-and-branch chains on the ray's direction, mispredicted per ray.
     let d = dir.to_array();
