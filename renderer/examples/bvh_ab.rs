@@ -9,7 +9,9 @@
 //! traced one `intersect` after another in a loop (`bench::trace_one_at_a_time`), or, for a
 //! variant prefixed with `r` (`r5`), through `bench::trace`'s parallel iterator on the
 //! one-thread pool. The variant `e` is Embree in this process (`renderer::embree`, the library
-//! of `target/embree-venv`, fast mode; `er` its robust mode, `e2` kept to its AVX2 kernels), traced in the same kind of loop.
+//! of `target/embree-venv`, fast mode; `er` its robust mode, `e2` kept to its AVX2 kernels), traced in the same kind of loop;
+//! `e16` and `er16` trace 16-ray packets (`rtcIntersect16`, as Mitsuba's `llvm_ad_rgb` does on
+//! an AVX-512 CPU), after checking that they answer as `rtcIntersect1` does.
 //! `MESH=cornell` or `MESH=sphere` runs one of the two meshes.
 
 use renderer::bench::{displaced_sphere, thread_cpu_seconds, trace, trace_one_at_a_time, RayBatch, SphereStyle};
@@ -25,7 +27,7 @@ fn main() {
     let ws = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf();
     let scene = Scene::load(&ws.join("scenes/cornell-box/scene.toml")).expect("scene");
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
-    let is_embree = |v: &str| v == "e" || v == "er" || v == "e2";
+    let is_embree = |v: &str| v == "e" || v == "er" || v == "e2" || v == "e16" || v == "er16";
     let lib = |config: Option<&str>| {
         variants.iter().any(|v| is_embree(v)).then(|| {
             let path = library_in_venv(&ws.join("target/embree-venv")).unwrap_or_else(|e| panic!("{e}"));
@@ -70,7 +72,7 @@ fn main() {
             .iter()
             .map(|v| {
                 let dev = if v == "e2" { &embree_avx2 } else { &embree };
-                is_embree(v).then(|| dev.as_ref().unwrap().scene(&mesh, v == "er").unwrap_or_else(|e| panic!("{e}")))
+                is_embree(v).then(|| dev.as_ref().unwrap().scene(&mesh, v.starts_with("er")).unwrap_or_else(|e| panic!("{e}")))
             })
             .collect();
         for (v, a) in variants.iter().zip(&accels) {
@@ -83,6 +85,18 @@ fn main() {
             }
             println!();
         }
+        for (v, e) in variants.iter().zip(&scenes) {
+            let Some(e) = e.as_ref().filter(|_| v.ends_with("16")) else { continue };
+            for (set, batch) in [("camera", &cam), ("random", &rnd)] {
+                let rays: Vec<_> = (0..batch.len()).map(|i| (batch.origins[i], batch.dirs[i], batch.tmax[i])).collect();
+                let mut r = vec![None; batch.len()];
+                for (c, o) in rays.chunks(16).zip(r.chunks_mut(16)) {
+                    e.intersect16(c, o);
+                }
+                let differ = (0..batch.len()).filter(|&i| r[i] != e.intersect(batch.origins[i], batch.dirs[i], batch.tmax[i])).count();
+                println!("{name} {set} [{v}]: {differ} of {} rays answered differently by rtcIntersect1", batch.len());
+            }
+        }
         for (set, batch) in [("camera", &cam), ("random", &rnd)] {
             let mut times = vec![Vec::new(); accels.len()];
             for _ in 0..reps {
@@ -92,6 +106,14 @@ fn main() {
                         match (a, e) {
                             (Some(a), _) if v.starts_with('r') => drop(std::hint::black_box(trace(a, batch, 0))),
                             (Some(a), _) => drop(std::hint::black_box(trace_one_at_a_time(a, batch))),
+                            (None, Some(e)) if v.ends_with("16") => {
+                                let mut r = vec![None; batch.len()];
+                                let rays: Vec<_> = (0..batch.len()).map(|i| (batch.origins[i], batch.dirs[i], batch.tmax[i])).collect();
+                                for (c, o) in rays.chunks(16).zip(r.chunks_mut(16)) {
+                                    e.intersect16(c, o);
+                                }
+                                drop(std::hint::black_box(r));
+                            }
                             (None, Some(e)) => {
                                 let r: Vec<_> =
                                     (0..batch.len()).map(|i| e.intersect(batch.origins[i], batch.dirs[i], batch.tmax[i])).collect();

@@ -65,6 +65,29 @@ struct RayHit {
     inst: [u32; 9],
 }
 
+/// `struct RTCRayHit16`: `RTCRay16` (12 arrays of 16) then `RTCHit16` (7 arrays of 16, then
+/// `instID` and, in builds with instance arrays, `instPrimID`; room for four levels here).
+#[repr(C, align(64))]
+struct RayHit16 {
+    org: [[f32; 16]; 3],
+    tnear: [f32; 16],
+    dir: [[f32; 16]; 3],
+    time: [f32; 16],
+    tfar: [f32; 16],
+    mask: [u32; 16],
+    id: [u32; 16],
+    flags: [u32; 16],
+    ng: [[f32; 16]; 3],
+    u: [f32; 16],
+    v: [f32; 16],
+    prim_id: [u32; 16],
+    geom_id: [u32; 16],
+    inst: [[u32; 16]; 4],
+}
+
+#[repr(C, align(64))]
+struct Valid16([i32; 16]);
+
 /// The C functions used, resolved once.
 struct Api {
     new_device: unsafe extern "C" fn(*const c_char) -> Device,
@@ -80,6 +103,7 @@ struct Api {
     attach_geometry: unsafe extern "C" fn(Scene, Geometry) -> c_uint,
     release_geometry: unsafe extern "C" fn(Geometry),
     intersect1: unsafe extern "C" fn(Scene, *mut RayHit, *mut c_void),
+    intersect16: unsafe extern "C" fn(*const Valid16, Scene, *mut RayHit16, *mut c_void),
 }
 
 /// A loaded Embree 4 library with a device of its default configuration (as embreex makes).
@@ -154,6 +178,7 @@ impl Embree {
             attach_geometry: sym(&lib, path, "rtcAttachGeometry")?,
             release_geometry: sym(&lib, path, "rtcReleaseGeometry")?,
             intersect1: sym(&lib, path, "rtcIntersect1")?,
+            intersect16: sym(&lib, path, "rtcIntersect16")?,
         };
         // SAFETY: a null configuration string is Embree's default configuration; otherwise a
         // NUL-terminated string that lives across the call.
@@ -274,6 +299,34 @@ impl EmbreeScene<'_> {
         // null arguments are rtcIntersect1's defaults.
         unsafe { (self.embree.api.intersect1)(self.scene, &mut rh, std::ptr::null_mut()) };
         (rh.geom_id != INVALID_GEOMETRY_ID).then_some((rh.prim_id, rh.tfar))
+    }
+}
+
+impl EmbreeScene<'_> {
+    /// Closest hits of up to 16 rays in one `rtcIntersect16` call (a packet, as Mitsuba's
+    /// `llvm_ad_rgb` traces on a CPU with AVX-512), into `out[..rays.len()]`.
+    pub fn intersect16(&self, rays: &[(Vec3, Vec3, f32)], out: &mut [Option<(u32, f32)>]) {
+        assert!(rays.len() <= 16 && out.len() >= rays.len());
+        let mut valid = Valid16([0; 16]);
+        // SAFETY: all-zero is a valid bit pattern for every field (plain numbers).
+        let mut rh: RayHit16 = unsafe { std::mem::zeroed() };
+        for (i, &(o, d, tmax)) in rays.iter().enumerate() {
+            valid.0[i] = -1;
+            for a in 0..3 {
+                rh.org[a][i] = o[a];
+                rh.dir[a][i] = d[a];
+            }
+            rh.tfar[i] = tmax.min(1e37);
+            rh.mask[i] = u32::MAX;
+            rh.prim_id[i] = INVALID_GEOMETRY_ID;
+            rh.geom_id[i] = INVALID_GEOMETRY_ID;
+        }
+        // SAFETY: a committed scene, a 64-byte aligned valid mask and ray-hit packet of
+        // `RTCRayHit16`'s layout (and more room); null arguments are the defaults.
+        unsafe { (self.embree.api.intersect16)(&valid, self.scene, &mut rh, std::ptr::null_mut()) };
+        for (i, o) in out[..rays.len()].iter_mut().enumerate() {
+            *o = (rh.geom_id[i] != INVALID_GEOMETRY_ID).then_some((rh.prim_id[i], rh.tfar[i]));
+        }
     }
 }
 

@@ -142,6 +142,15 @@ fn in_process_embree_matches_embreex() {
                         }
                     }
                 }
+                // The 16-ray packets (`rtcIntersect16`, bvh_ab's `e16`) on the same scene: the same
+                // answers as one ray at a time, in packets of 16 and a last partial one.
+                let rays: Vec<_> = (0..batch.len() - 3).map(|i| (batch.origins[i], batch.dirs[i], batch.tmax[i])).collect();
+                let mut packed = vec![None; rays.len()];
+                for (c, o) in rays.chunks(16).zip(packed.chunks_mut(16)) {
+                    scene.intersect16(c, o);
+                }
+                let differ16 = (0..rays.len()).filter(|&i| packed[i] != scene.intersect(rays[i].0, rays[i].1, rays[i].2)).count();
+                assert_eq!(differ16, 0, "{name}/{set} robust={robust}: rtcIntersect16 differs from rtcIntersect1");
                 println!("{name:<17} {set:<7} robust={robust}: {hits} hits, {differ} answers differ of {}", batch.len());
                 assert!(hits > batch.len() / 10, "{name}/{set}: too few hits ({hits}) to check the binding");
                 // One build's tie-breaking against another's: 1e-4 of the rays at most.
