@@ -88,11 +88,7 @@ fn main() {
         for (v, e) in variants.iter().zip(&scenes) {
             let Some(e) = e.as_ref().filter(|_| v.ends_with("16")) else { continue };
             for (set, batch) in [("camera", &cam), ("random", &rnd)] {
-                let rays: Vec<_> = (0..batch.len()).map(|i| (batch.origins[i], batch.dirs[i], batch.tmax[i])).collect();
-                let mut r = vec![None; batch.len()];
-                for (c, o) in rays.chunks(16).zip(r.chunks_mut(16)) {
-                    e.intersect16(c, o);
-                }
+                let r = trace16(e, batch);
                 let differ = (0..batch.len()).filter(|&i| r[i] != e.intersect(batch.origins[i], batch.dirs[i], batch.tmax[i])).count();
                 println!("{name} {set} [{v}]: {differ} of {} rays answered differently by rtcIntersect1", batch.len());
             }
@@ -106,14 +102,7 @@ fn main() {
                         match (a, e) {
                             (Some(a), _) if v.starts_with('r') => drop(std::hint::black_box(trace(a, batch, 0))),
                             (Some(a), _) => drop(std::hint::black_box(trace_one_at_a_time(a, batch))),
-                            (None, Some(e)) if v.ends_with("16") => {
-                                let mut r = vec![None; batch.len()];
-                                let rays: Vec<_> = (0..batch.len()).map(|i| (batch.origins[i], batch.dirs[i], batch.tmax[i])).collect();
-                                for (c, o) in rays.chunks(16).zip(r.chunks_mut(16)) {
-                                    e.intersect16(c, o);
-                                }
-                                drop(std::hint::black_box(r));
-                            }
+                            (None, Some(e)) if v.ends_with("16") => drop(std::hint::black_box(trace16(e, batch))),
                             (None, Some(e)) => {
                                 let r: Vec<_> =
                                     (0..batch.len()).map(|i| e.intersect(batch.origins[i], batch.dirs[i], batch.tmax[i])).collect();
@@ -132,4 +121,14 @@ fn main() {
             }
         }
     }
+}
+
+/// `batch` through Embree in packets of 16 rays (the last one partial).
+fn trace16(e: &EmbreeScene, batch: &RayBatch) -> Vec<Option<(u32, f32)>> {
+    let mut r = vec![None; batch.len()];
+    for (k, out) in r.chunks_mut(16).enumerate() {
+        let s = 16 * k..16 * k + out.len();
+        e.intersect16(&batch.origins[s.clone()], &batch.dirs[s.clone()], &batch.tmax[s], out);
+    }
+    r
 }

@@ -300,23 +300,23 @@ impl EmbreeScene<'_> {
         unsafe { (self.embree.api.intersect1)(self.scene, &mut rh, std::ptr::null_mut()) };
         (rh.geom_id != INVALID_GEOMETRY_ID).then_some((rh.prim_id, rh.tfar))
     }
-}
 
-impl EmbreeScene<'_> {
-    /// Closest hits of up to 16 rays in one `rtcIntersect16` call (a packet, as Mitsuba's
-    /// `llvm_ad_rgb` traces on a CPU with AVX-512), into `out[..rays.len()]`.
-    pub fn intersect16(&self, rays: &[(Vec3, Vec3, f32)], out: &mut [Option<(u32, f32)>]) {
-        assert!(rays.len() <= 16 && out.len() >= rays.len());
+    /// Closest hits of up to 16 rays (origins, directions, tmax: as `RayBatch` holds them) in one
+    /// `rtcIntersect16` call (a packet, as Mitsuba's `llvm_ad_rgb` traces on a CPU with AVX-512),
+    /// into `out[..org.len()]`.
+    pub fn intersect16(&self, org: &[Vec3], dir: &[Vec3], tmax: &[f32], out: &mut [Option<(u32, f32)>]) {
+        let n = org.len();
+        assert!(n <= 16 && dir.len() == n && tmax.len() == n && out.len() >= n);
         let mut valid = Valid16([0; 16]);
         // SAFETY: all-zero is a valid bit pattern for every field (plain numbers).
         let mut rh: RayHit16 = unsafe { std::mem::zeroed() };
-        for (i, &(o, d, tmax)) in rays.iter().enumerate() {
+        for i in 0..n {
             valid.0[i] = -1;
             for a in 0..3 {
-                rh.org[a][i] = o[a];
-                rh.dir[a][i] = d[a];
+                rh.org[a][i] = org[i][a];
+                rh.dir[a][i] = dir[i][a];
             }
-            rh.tfar[i] = tmax.min(1e37);
+            rh.tfar[i] = tmax[i].min(1e37);
             rh.mask[i] = u32::MAX;
             rh.prim_id[i] = INVALID_GEOMETRY_ID;
             rh.geom_id[i] = INVALID_GEOMETRY_ID;
@@ -324,7 +324,7 @@ impl EmbreeScene<'_> {
         // SAFETY: a committed scene, a 64-byte aligned valid mask and ray-hit packet of
         // `RTCRayHit16`'s layout (and more room); null arguments are the defaults.
         unsafe { (self.embree.api.intersect16)(&valid, self.scene, &mut rh, std::ptr::null_mut()) };
-        for (i, o) in out[..rays.len()].iter_mut().enumerate() {
+        for (i, o) in out[..n].iter_mut().enumerate() {
             *o = (rh.geom_id[i] != INVALID_GEOMETRY_ID).then_some((rh.prim_id[i], rh.tfar[i]));
         }
     }

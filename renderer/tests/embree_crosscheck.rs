@@ -144,12 +144,13 @@ fn in_process_embree_matches_embreex() {
                 }
                 // The 16-ray packets (`rtcIntersect16`, bvh_ab's `e16`) on the same scene: the same
                 // answers as one ray at a time, in packets of 16 and a last partial one.
-                let rays: Vec<_> = (0..batch.len() - 3).map(|i| (batch.origins[i], batch.dirs[i], batch.tmax[i])).collect();
-                let mut packed = vec![None; rays.len()];
-                for (c, o) in rays.chunks(16).zip(packed.chunks_mut(16)) {
-                    scene.intersect16(c, o);
+                let n = batch.len() - 3;
+                let mut packed = vec![None; n];
+                for (k, out) in packed.chunks_mut(16).enumerate() {
+                    let s = 16 * k..16 * k + out.len();
+                    scene.intersect16(&batch.origins[s.clone()], &batch.dirs[s.clone()], &batch.tmax[s], out);
                 }
-                let differ16 = (0..rays.len()).filter(|&i| packed[i] != scene.intersect(rays[i].0, rays[i].1, rays[i].2)).count();
+                let differ16 = (0..n).filter(|&i| packed[i] != scene.intersect(batch.origins[i], batch.dirs[i], batch.tmax[i])).count();
                 assert_eq!(differ16, 0, "{name}/{set} robust={robust}: rtcIntersect16 differs from rtcIntersect1");
                 println!("{name:<17} {set:<7} robust={robust}: {hits} hits, {differ} answers differ of {}", batch.len());
                 assert!(hits > batch.len() / 10, "{name}/{set}: too few hits ({hits}) to check the binding");
