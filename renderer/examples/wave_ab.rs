@@ -1,0 +1,58 @@
+//! A/B of the wavefront's instruction sets in one process, single-thread, interleaved run by
+//! run: the Cornell box's camera samples (128², `SPP` per pixel, 5 bounces) through
+//! `wave::trace_batch_variant` with variants given as arguments (0 SSE2, 1 AVX2, 2 AVX-512),
+//! median of `REPS` runs in paths per CPU second of the thread. Checks that every variant
+//! returns the same bits.
+use glam::Vec2;
+use renderer::bench::thread_cpu_seconds;
+use renderer::integrator::wave::{trace_batch_variant, LaneResult, LANES};
+use renderer::rng::Pcg32;
+use renderer::scene::Scene;
+use std::path::Path;
+
+fn main() {
+    let variants: Vec<u8> = std::env::args().skip(1).map(|a| a.parse().expect("variant 0, 1 or 2")).collect();
+    let reps: usize = std::env::var("REPS").ok().and_then(|s| s.parse().ok()).unwrap_or(7);
+    let spp: u32 = std::env::var("SPP").ok().and_then(|s| s.parse().ok()).unwrap_or(4);
+    let ws = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf();
+    let scene = Scene::load(&ws.join("scenes/cornell-box/scene.toml")).expect("scene");
+    let cam = &scene.camera;
+    let mut starts = Vec::new();
+    for py in 0..cam.height {
+        for px in 0..cam.width {
+            let pixel = py as u64 * cam.width as u64 + px as u64;
+            for s in 0..spp {
+                let mut rng = Pcg32::for_sample(1, pixel, s as u64);
+                let film = Vec2::new(px as f32, py as f32) + rng.next_2d();
+                starts.push((cam.ray(film), rng));
+            }
+        }
+    }
+    let run = |v: u8| -> (f64, Vec<LaneResult>) {
+        let mut out = Vec::with_capacity(starts.len());
+        let t0 = thread_cpu_seconds().expect("thread clock");
+        for chunk in starts.chunks(LANES) {
+            let rays: Vec<_> = chunk.iter().map(|c| c.0).collect();
+            let mut rngs: Vec<_> = chunk.iter().map(|c| c.1.clone()).collect();
+            let r = trace_batch_variant(&scene, &rays, &mut rngs, 5, false, v);
+            out.extend_from_slice(&r[..chunk.len()]);
+        }
+        (thread_cpu_seconds().unwrap() - t0, out)
+    };
+    let bits = |o: &[LaneResult]| o.iter().flat_map(|r| r.radiance.to_array().map(f32::to_bits)).collect::<Vec<_>>();
+    let reference = bits(&run(variants[0]).1);
+    let mut times = vec![Vec::new(); variants.len()];
+    for _ in 0..reps {
+        for (k, &v) in variants.iter().enumerate() {
+            let (t, o) = run(v);
+            assert!(bits(&o) == reference, "variant {v} differs");
+            times[k].push(t);
+        }
+    }
+    for (k, v) in variants.iter().enumerate() {
+        let mut t = times[k].clone();
+        t.sort_by(f64::total_cmp);
+        let med = t[t.len() / 2];
+        println!("variant {v}: median {:.3} M paths/CPU s, best {:.3}", starts.len() as f64 / med / 1e6, starts.len() as f64 / t[0] / 1e6);
+    }
+}
