@@ -1,8 +1,9 @@
 //! A/B of the wavefront's instruction sets in one process, single-thread, interleaved run by
-//! run: the Cornell box's camera samples (128², `SPP` per pixel, 5 bounces) through
+//! run: the Cornell box's camera samples (its 256² image, `SPP` per pixel, default 4; 5 bounces) through
 //! `wave::trace_batch_variant` with variants given as arguments (0 SSE2, 1 AVX2, 2 AVX-512),
-//! median of `REPS` runs in paths per CPU second of the thread. Checks that every variant
-//! returns the same bits.
+//! median of `REPS` runs in paths per CPU second of the thread, and each variant's rate
+//! against the first one's, repetition by repetition. Checks that every variant returns the
+//! same bits.
 use glam::Vec2;
 use renderer::bench::thread_cpu_seconds;
 use renderer::integrator::wave::{trace_batch_variant, LaneResult, LANES};
@@ -48,6 +49,19 @@ fn main() {
             assert!(bits(&o) == reference, "variant {v} differs");
             times[k].push(t);
         }
+    }
+    // Runs of different variants in one repetition are adjacent in time, so their ratio is
+    // less disturbed by the host's load than the medians are.
+    for (k, v) in variants.iter().enumerate().skip(1) {
+        let mut r: Vec<f64> = times[0].iter().zip(&times[k]).map(|(a, b)| a / b).collect();
+        r.sort_by(f64::total_cmp);
+        let faster = r.iter().filter(|&&x| x > 1.0).count();
+        println!(
+            "variant {v} / variant {}: median of the per-repetition rate ratios {:.3} (faster in {faster} of {})",
+            variants[0],
+            r[r.len() / 2],
+            r.len()
+        );
     }
     for (k, v) in variants.iter().enumerate() {
         let mut t = times[k].clone();
