@@ -113,7 +113,6 @@ struct Wave {
 /// Traces `rays.len()` (at most `LANES`) camera rays with their random streams, as
 /// `path::trace` would one by one with a radiance-only request.
 pub fn trace_batch(scene: &Scene, rays: &[Ray], rngs: &mut [Pcg32], max_bounces: u32, russian_roulette: bool) -> [LaneResult; LANES] {
-    assert!(rays.len() <= LANES && rays.len() == rngs.len());
     trace_batch_variant(scene, rays, rngs, max_bounces, russian_roulette, 2)
 }
 
