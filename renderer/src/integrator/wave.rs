@@ -143,7 +143,7 @@ pub fn trace_batch_variant(
     trace_batch_impl(scene, rays, rngs, max_bounces, rr)
 }
 
-/// Stage 2 in 512-bit registers (and the BVH queries, which are calls, unchanged): 5–6 % more
+/// Stage 2 in 512-bit registers (and the BVH queries, which are calls, unchanged): 4–6 % more
 /// paths per second than `trace_batch_avx2` on an AVX-512 Xeon (`examples/wave_ab.rs`,
 /// docs/performance.md). The same operations, so the same bits.
 #[cfg(target_arch = "x86_64")]
