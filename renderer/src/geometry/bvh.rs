@@ -161,7 +161,9 @@ impl RayData {
         let [ix, iy, iz, sz] = (Vec4::ONE / Vec4::new(clamp(d.x), clamp(d.y), clamp(d.z), dkz)).to_array();
         let (dkx, dky) = select_unpredictable(flip, (dky, dkx), (dkx, dky));
         let (sx, sy) = (dkx * sz, dky * sz);
-        let near = |i: usize| if d[i] < 0.0 { 3 + i } else { i };
+        // By the sign bit, as the clamped reciprocal keeps it: for d[i] = −0.0 (1/d = −1e20) the
+        // far plane is the minimum one.
+        let near = |i: usize| if d[i].is_sign_negative() { 3 + i } else { i };
         Some(RayData {
             o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
             inv: [Vec4::splat(ix), Vec4::splat(iy), Vec4::splat(iz)],

@@ -429,3 +429,35 @@ fn offset_origin_is_bit_identical_to_the_branching_version() {
     // The non-finite guard must not have hidden the offset arithmetic itself.
     assert!(checked > 100_000, "only {checked} finite inputs");
 }
+
+/// A direction component of exactly −0.0 is as parallel to its axis as +0.0: the ray must find
+/// what the same ray with +0.0 finds. (Box planes were ordered by `d < 0`, false for −0.0,
+/// while the clamped reciprocal kept the sign: −1e20 with the planes of a positive direction,
+/// so every box the origin lay within on that axis was culled.)
+#[test]
+fn negative_zero_direction_components_hit_like_positive_zero() {
+    let mesh = grid(8, 2.0, Vec3::new(-1.0, -1.0, 0.0));
+    let mut rng = Pcg32::new(17, 0);
+    let mut hits = 0;
+    for _ in 0..2000 {
+        let o = Vec3::new(rng.next_f32() * 1.4 - 0.7, rng.next_f32() * 1.4 - 0.7, 0.5 + rng.next_f32());
+        let lateral = rng.next_f32() * 0.2 - 0.1;
+        for axis in 0..2 {
+            for isa in [true, false] {
+                let mut a = Accel::build(&mesh);
+                a.set_avx2(isa);
+                let mut pos = Vec3::new(lateral, lateral, -1.0);
+                pos[axis] = 0.0;
+                let mut neg = pos;
+                neg[axis] = -0.0;
+                let want = a.intersect(&Ray::new(o, pos), f32::INFINITY).map(|h| (h.t, h.prim));
+                let got = a.intersect(&Ray::new(o, neg), f32::INFINITY).map(|h| (h.t, h.prim));
+                assert!(want.is_some(), "the grid lies below every origin: {o} {pos}");
+                assert_eq!(want, got, "origin {o}, direction {neg:?} (avx2 {isa})");
+                assert!(a.occluded(&Ray::new(o, neg), f32::INFINITY));
+                hits += 1;
+            }
+        }
+    }
+    assert_eq!(hits, 8000);
+}
