@@ -69,16 +69,15 @@ pub(super) fn tri4_fast<const ANY: bool>(blk: &Tri4, r: &RayData, tmax: f32) -> 
     let flip = det.cmplt(zero);
     let ts = Vec4::select(flip, -t_scaled, t_scaled);
     let dabs = det.abs();
-    let t = t_scaled / det;
     let tmax4 = Vec4::splat(tmax);
-    let ok = !(neg & pos)
-        & dabs.cmpgt(zero)
-        & dabs.cmplt(Vec4::INFINITY)
-        & ts.cmpgt(zero)
-        & ts.cmplt(tmax4 * dabs)
-        & t.cmpgt(zero)
-        & t.cmplt(tmax4);
-    let m = ok.bitmask();
+    // Most blocks are missed, which the tests without the division decide: the division is
+    // only on the path of a possible hit.
+    let ok = !(neg & pos) & dabs.cmpgt(zero) & dabs.cmplt(Vec4::INFINITY) & ts.cmpgt(zero) & ts.cmplt(tmax4 * dabs);
+    if !ok.any() {
+        return Tri4Result::Miss;
+    }
+    let t = t_scaled / det;
+    let m = (ok & t.cmpgt(zero) & t.cmplt(tmax4)).bitmask();
     if m == 0 {
         return Tri4Result::Miss;
     }
