@@ -4,7 +4,8 @@
 //! followed by `:sse2` to force the SSE2 node test, `:avx2` for the AVX2 query without AVX-512's
 //! registers where the CPU has them, `:tri4` for the AVX2 node test with leaves
 //! tested one `Tri4` block at a time (`:` for the default) and by an obvhs build
-//! preset (`:fast`, `:medium`, `:slow`; `very_fast` by default), e.g.
+//! preset (`:very_fast`, `:fast`, `:medium`, `:slow`; by default `bvh::build_params`'s, which
+//! depends on the mesh's size), e.g.
 //! `REPS=7 cargo run --release -p renderer --example bvh_ab -- 3:sse2 3 4 3::slow`. Rays are
 //! traced one `intersect` after another in a loop (`bench::trace_one_at_a_time`), or, for a
 //! variant prefixed with `r` (`r5`), through `bench::trace`'s parallel iterator on the
@@ -16,7 +17,7 @@
 
 use renderer::bench::{displaced_sphere, thread_cpu_seconds, trace, trace_one_at_a_time, RayBatch, SphereStyle};
 use renderer::embree::{library_in_venv, Embree, EmbreeScene};
-use renderer::geometry::bvh::default_build_params;
+use renderer::geometry::bvh::{build_params, default_build_params};
 use renderer::geometry::Accel;
 use renderer::scene::Scene;
 use std::path::Path;
@@ -52,7 +53,8 @@ fn main() {
                 let c = parts.next().unwrap_or("");
                 let isa = parts.next().unwrap_or("");
                 let params = match parts.next().unwrap_or("") {
-                    "" | "very_fast" => default_build_params(),
+                    "" => build_params(mesh.triangles.len()),
+                    "very_fast" => default_build_params(),
                     "fastest" => obvhs::BvhBuildParams::fastest_build(),
                     "fast" => obvhs::BvhBuildParams::fast_build(),
                     "medium" => obvhs::BvhBuildParams::medium_build(),

@@ -77,7 +77,7 @@ pub struct Accel {
 impl Accel {
     /// Builds the BVH (in parallel). Degenerate triangles are kept in the mesh but can never be hit.
     pub fn build(mesh: &Mesh) -> Accel {
-        Accel::build_with(mesh, bvh::default_build_params())
+        Accel::build_with(mesh, bvh::build_params(mesh.triangles.len()))
     }
 
     /// [`Accel::build`] with explicit obvhs build parameters (for benchmarking the presets).
