@@ -437,15 +437,18 @@ fn offset_origin_is_bit_identical_to_the_branching_version() {
 #[test]
 fn negative_zero_direction_components_hit_like_positive_zero() {
     let mesh = grid(8, 2.0, Vec3::new(-1.0, -1.0, 0.0));
+    let accels = [true, false].map(|isa| {
+        let mut a = Accel::build(&mesh);
+        a.set_avx2(isa);
+        (isa, a)
+    });
     let mut rng = Pcg32::new(17, 0);
     let mut hits = 0;
     for _ in 0..2000 {
         let o = Vec3::new(rng.next_f32() * 1.4 - 0.7, rng.next_f32() * 1.4 - 0.7, 0.5 + rng.next_f32());
         let lateral = rng.next_f32() * 0.2 - 0.1;
         for axis in 0..2 {
-            for isa in [true, false] {
-                let mut a = Accel::build(&mesh);
-                a.set_avx2(isa);
+            for (isa, a) in &accels {
                 let mut pos = Vec3::new(lateral, lateral, -1.0);
                 pos[axis] = 0.0;
                 let mut neg = pos;
