@@ -598,10 +598,11 @@ fn leaf_test_tri4<const ANY: bool, P: Probe>(
 ) -> bool {
     for blk in blocks {
         probe.block();
-        let h = match tri4_fast::<ANY>(blk, r, *tmax) {
+        let tie_id = best.map_or(0, |h| h.1);
+        let h = match tri4_fast::<ANY>(blk, r, *tmax, tie_id) {
             Tri4Result::Miss => continue,
             Tri4Result::Hit(h) => h,
-            Tri4Result::EdgeZero => match tri4_scalar(blk, r, *tmax) {
+            Tri4Result::EdgeZero => match tri4_scalar(blk, r, *tmax, tie_id) {
                 Some(h) => h,
                 None => continue,
             },

@@ -2,6 +2,7 @@
 //! a watertight ray/triangle test, and robust ray-origin offsets.
 
 pub mod bvh;
+pub mod packet;
 #[cfg(test)]
 mod tests;
 pub mod triangle;
@@ -72,10 +73,14 @@ pub struct Hit {
 /// The ray-query structure over a [`Mesh`].
 pub struct Accel {
     bvh: bvh::Bvh,
+    /// The packet query, for a mesh of at most `packet::PACKET_MAX` triangles on a CPU with
+    /// AVX-512.
+    packets: Option<packet::Packets>,
 }
 
 impl Accel {
-    /// Builds the BVH (in parallel). Degenerate triangles are kept in the mesh but can never be hit.
+    /// Builds the BVH (in parallel). Degenerate triangles, and triangles with the same vertices
+    /// as an earlier one, are kept in the mesh but can never be hit.
     pub fn build(mesh: &Mesh) -> Accel {
         Accel::build_with(mesh, bvh::build_params(mesh.triangles.len()))
     }
@@ -91,6 +96,7 @@ impl Accel {
         let n = mesh.positions.len();
         // Triangles with an out-of-range index, a non-finite vertex or zero area are left out
         // of the BVH entirely, so no traversal or build step ever sees them.
+        let mut seen = std::collections::HashSet::new();
         let (tris, valid): (Vec<[Vec3; 3]>, Vec<u32>) = mesh
             .triangles
             .iter()
@@ -98,8 +104,18 @@ impl Accel {
             .filter(|(_, t)| t.iter().all(|&v| (v as usize) < n))
             .map(|(i, t)| ([mesh.positions[t[0] as usize], mesh.positions[t[1] as usize], mesh.positions[t[2] as usize]], i as u32))
             .filter(|(p, _)| !triangle::is_degenerate(p[0], p[1], p[2]))
+            .filter(|(p, _)| {
+                // A triangle with the same three vertices as an earlier one is left out too:
+                // both would be hit at the same distance, and which one a query reported would
+                // depend on the order it tested them in, which differs between the BVH and the
+                // packet query (McGuire's Cornell box has three such pairs).
+                let mut key = p.map(|v| v.to_array().map(f32::to_bits));
+                key.sort_unstable();
+                seen.insert(key)
+            })
             .unzip();
-        Accel { bvh: bvh::Bvh::build(tris, valid, params, c_node) }
+        let packets = packet::Packets::new(&tris, &valid);
+        Accel { bvh: bvh::Bvh::build(tris, valid, params, c_node), packets }
     }
 
     /// Number of CWBVH nodes (0 for a mesh without a single valid triangle).
@@ -137,6 +153,56 @@ impl Accel {
     #[inline(always)]
     pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<Hit> {
         self.bvh.intersect(ray.origin, ray.dir, tmax).map(|(t, prim, b1, b2)| Hit { t, prim, bary: Vec2::new(b1, b2) })
+    }
+
+    /// The packet query, where this mesh and CPU have one (see [`packet::Packets`]).
+    pub fn packets(&self) -> Option<&packet::Packets> {
+        self.packets.as_ref()
+    }
+
+    /// Leaves the packet query out (for A/B benchmarks); returns whether there was one.
+    pub fn drop_packets(&mut self) -> bool {
+        self.packets.take().is_some()
+    }
+
+    /// Closest hits with t in (0, tmax) of the rays `rays[i]` with `live[i]`, into `out[i]`
+    /// (`None` for the others): through the packet query, sixteen rays at a time, where this
+    /// mesh and CPU have one and at least `packet::MIN_LANES` rays are left; else one by one.
+    /// The same answers as [`Accel::intersect`], bit for bit.
+    #[inline]
+    pub fn intersect_live(&self, rays: &[Ray], live: &[bool], tmax: f32, out: &mut [Option<Hit>]) {
+        let mut lanes = [0usize; packet::WIDTH];
+        let mut k = 0;
+        let mut left = live.iter().filter(|&&l| l).count();
+        for i in 0..rays.len() {
+            out[i] = None;
+            if !live[i] {
+                continue;
+            }
+            match &self.packets {
+                Some(p) if left >= packet::MIN_LANES || k > 0 => {
+                    lanes[k] = i;
+                    k += 1;
+                    left -= 1;
+                    if k == packet::WIDTH || left == 0 {
+                        let mut pr = [Ray::new(Vec3::ZERO, Vec3::Z); packet::WIDTH];
+                        let mut po = [None; packet::WIDTH];
+                        for (j, &l) in lanes[..k].iter().enumerate() {
+                            pr[j] = rays[l];
+                        }
+                        p.intersect(&self.bvh, &pr[..k], tmax, &mut po);
+                        for (j, &l) in lanes[..k].iter().enumerate() {
+                            out[l] = po[j];
+                        }
+                        k = 0;
+                    }
+                }
+                _ => {
+                    out[i] = self.intersect(&rays[i], tmax);
+                    left -= 1;
+                }
+            }
+        }
     }
 
     /// Any hit with t in (0, tmax) (shadow rays).

@@ -86,6 +86,16 @@ fn shear_perm(dir: Vec3) -> Option<[usize; 3]> {
     Some([kx, ky, kz])
 }
 
+/// Factor on `tmax` in the range test made before the division (`t_scaled` against
+/// `tmax · |det|`). That test only spares the division; whether a triangle is hit is decided on
+/// the divided t. Unwidened, the rounding of `tmax · |det|` could reject a triangle whose t
+/// rounds below `tmax`, so which of two triangles hit at nearly the same distance a query
+/// reported depended on the order it tested them in. Widened by 2^-20 (above the 2^-23 that
+/// the two roundings can take off) it rejects only triangles at or beyond `tmax`, and every
+/// query — BVH traversal in any order, the packet query — reports the same hit: the closest,
+/// and of hits at exactly the same distance the lowest triangle index.
+pub const RANGE_WIDEN: f32 = 1.0 + 1.0 / (1 << 20) as f32;
+
 /// Intersection of the sheared ray with triangle (p0, p1, p2): `(t, b1, b2)` with t in (0, tmax),
 /// where b1, b2 are the weights of p1 and p2.
 #[inline(always)]
@@ -125,9 +135,10 @@ pub fn intersect_sheared(a: [f32; 3], b: [f32; 3], c: [f32; 3], tmax: f32) -> Op
         return None;
     }
     let t_scaled = u * az + v * bz + w * cz;
-    // Compare before dividing (sign-aware) so a back-facing det never flips the range test.
+    // Compare before dividing (sign-aware) so a back-facing det never flips the range test;
+    // widened so that it keeps every triangle whose divided t is below tmax (see `RANGE_WIDEN`).
     let (ts, d) = if det < 0.0 { (-t_scaled, -det) } else { (t_scaled, det) };
-    if !(ts > 0.0) || !(ts < tmax * d) {
+    if !(ts > 0.0) || !(ts < tmax * RANGE_WIDEN * d) {
         return None;
     }
     let t = t_scaled / det;

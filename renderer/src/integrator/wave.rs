@@ -192,6 +192,12 @@ fn trace_batch_impl(scene: &Scene, rays: &[Ray], rngs: &mut [Pcg32], max_bounces
 /// Stage 1, path by path: `path::trace` from the closest-hit query to the light selection.
 #[inline(always)]
 fn stage_hit(scene: &Scene, w: &mut Wave, rngs: &mut [Pcg32], out: &mut [LaneResult; LANES], depth: u32, max_bounces: u32, n: usize) {
+    // Where the mesh has a packet query, the live lanes' closest hits first, sixteen at a time.
+    let packed = scene.accel.packets().is_some();
+    let mut hits = [None; LANES];
+    if packed {
+        scene.accel.intersect_live(&w.ray[..n], &w.alive[..n], f32::INFINITY, &mut hits[..n]);
+    }
     for i in 0..n {
         w.has_light[i] = false;
         if !w.alive[i] {
@@ -201,7 +207,8 @@ fn stage_hit(scene: &Scene, w: &mut Wave, rngs: &mut [Pcg32], out: &mut [LaneRes
         let ray = w.ray[i];
         let (beta_d, beta_s) = (w.beta_d.get(i), w.beta_s.get(i));
         out[i].rays += 1;
-        let Some(hit) = scene.accel.intersect(&ray, f32::INFINITY) else {
+        let hit = if packed { hits[i] } else { scene.accel.intersect(&ray, f32::INFINITY) };
+        let Some(hit) = hit else {
             let le = scene.lights.env_radiance(ray.dir);
             if le.max_element() > 0.0 {
                 let wgt = if depth == 0 || w.prev_delta[i] { 1.0 } else { power_heuristic(w.prev_pdf[i], scene.lights.env_pdf(ray.dir)) };

@@ -2,7 +2,7 @@
 //! tested in one 256-bit operation and leaves two `Tri4` blocks at a time, with exactly the SSE2
 //! paths' floating-point operations (so the same hits bit for bit).
 
-use super::tri4::{closest_lane, tri4_test};
+use super::tri4::{closest_lane, ties, tri4_test};
 use super::{HitRec, Node, NodeTest, Probe, RayData, Tri4, ANY_HIT, SLAB_WIDEN, W};
 use std::arch::x86_64::*;
 
@@ -66,8 +66,9 @@ impl NodeTest for Avx2 {
         for pair in &mut pairs {
             probe.block();
             probe.block();
+            let tie_id = best.map_or(0, |h| h.1);
             // SAFETY: as in `node_test`.
-            if let Some(h) = unsafe { tri8_test::<ANY>(&pair[0], &pair[1], r, *tmax) } {
+            if let Some(h) = unsafe { tri8_test::<ANY>(&pair[0], &pair[1], r, *tmax, tie_id) } {
                 *tmax = h.0;
                 *best = Some(h);
                 if ANY {
@@ -79,17 +80,17 @@ impl NodeTest for Avx2 {
     }
 }
 
-/// `tri4_test(a)` and then `tri4_test(b)` against the closer `tmax` (with `ANY`: whether
+/// `tri4_test(a)` and then `tri4_test(b)` against the closer hit (with `ANY`: whether
 /// either has a hit, `ANY_HIT`), in one pass of 256-bit operations: lanes 0..4 are `a`'s triangles,
 /// 4..8 `b`'s, and every lane computes exactly `tri4_test`'s operations, so the result is
 /// bit-identical to the two `Tri4` tests (which remain the path where an edge function
-/// rounds to zero). The only order-dependent step of the sequence, `b` being tested
-/// against `a`'s hit distance, is redone for `b`'s lanes when `a` hits.
+/// rounds to zero): the closest of the eight hits, of equal distances the lowest index, which
+/// the sequence gives too.
 ///
 /// # Safety
 /// Only with AVX2 (an `Avx2` exists).
 #[inline(always)]
-unsafe fn tri8_test<const ANY: bool>(a: &Tri4, b: &Tri4, r: &RayData, tmax: f32) -> Option<HitRec> {
+unsafe fn tri8_test<const ANY: bool>(a: &Tri4, b: &Tri4, r: &RayData, tmax: f32, tie_id: u32) -> Option<HitRec> {
     // SAFETY: the caller has checked AVX2; the loads read whole `Vec4`s of `a` and `b`
     // and the stores write arrays of `W` floats.
     unsafe {
@@ -128,11 +129,11 @@ unsafe fn tri8_test<const ANY: bool>(a: &Tri4, b: &Tri4, r: &RayData, tmax: f32)
             _mm256_cmp_ps::<_CMP_EQ_OQ>(w, zero),
         );
         if _mm256_movemask_ps(eq0) != 0 {
-            let ha = tri4_test(a, r, tmax);
+            let ha = tri4_test(a, r, tmax, tie_id);
             if ANY && ha.is_some() {
                 return ha;
             }
-            let hb = tri4_test(b, r, ha.map_or(tmax, |h| h.0));
+            let hb = tri4_test(b, r, ha.map_or(tmax, |h| h.0), ha.map_or(tie_id, |h| h.1));
             return hb.or(ha);
         }
         macro_rules! lt {
@@ -154,27 +155,24 @@ unsafe fn tri8_test<const ANY: bool>(a: &Tri4, b: &Tri4, r: &RayData, tmax: f32)
         let dabs = _mm256_andnot_ps(sign, det);
         let tmax8 = _mm256_set1_ps(tmax);
         // As in `tri4_fast`: the division only on the path of a possible hit.
+        let tw = _mm256_set1_ps(tmax * crate::geometry::triangle::RANGE_WIDEN);
         let ok = _mm256_andnot_ps(
             _mm256_and_ps(neg, pos),
             _mm256_and_ps(
                 _mm256_and_ps(gt!(dabs), _mm256_cmp_ps::<_CMP_LT_OQ>(dabs, _mm256_set1_ps(f32::INFINITY))),
-                _mm256_and_ps(gt!(ts), _mm256_cmp_ps::<_CMP_LT_OQ>(ts, _mm256_mul_ps(tmax8, dabs))),
+                _mm256_and_ps(gt!(ts), _mm256_cmp_ps::<_CMP_LT_OQ>(ts, _mm256_mul_ps(tw, dabs))),
             ),
         );
         if _mm256_movemask_ps(ok) == 0 {
             return None;
         }
         let t = _mm256_div_ps(t_scaled, det);
-        macro_rules! in_range {
-            ($tm:expr) => {{
-                let tm = $tm;
-                _mm256_and_ps(
-                    _mm256_and_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(ts, _mm256_mul_ps(tm, dabs)), gt!(t)),
-                    _mm256_cmp_ps::<_CMP_LT_OQ>(t, tm),
-                )
-            }};
+        let ahead = _mm256_and_ps(ok, gt!(t));
+        let mut m = _mm256_movemask_ps(_mm256_and_ps(ahead, _mm256_cmp_ps::<_CMP_LT_OQ>(t, tmax8))) as u32;
+        let ids = [a.id[0], a.id[1], a.id[2], a.id[3], b.id[0], b.id[1], b.id[2], b.id[3]];
+        if !ANY {
+            m |= ties(&ids, _mm256_movemask_ps(_mm256_and_ps(ahead, _mm256_cmp_ps::<_CMP_EQ_OQ>(t, tmax8))) as u32, tie_id);
         }
-        let mut m = _mm256_movemask_ps(_mm256_and_ps(ok, _mm256_and_ps(gt!(t), _mm256_cmp_ps::<_CMP_LT_OQ>(t, tmax8)))) as u32;
         if m == 0 {
             return None;
         }
@@ -183,12 +181,7 @@ unsafe fn tri8_test<const ANY: bool>(a: &Tri4, b: &Tri4, r: &RayData, tmax: f32)
         }
         let mut ta = [0.0f32; W];
         _mm256_storeu_ps(ta.as_mut_ptr(), t);
-        if m & 0xf != 0 && m & 0xf0 != 0 {
-            // `b`'s lanes must also be in range of `a`'s hit, as when tested after it.
-            let ta_best = ta[closest_lane(&ta, m & 0xf)];
-            m &= 0xf | _mm256_movemask_ps(in_range!(_mm256_set1_ps(ta_best))) as u32;
-        }
-        let lane = closest_lane(&ta, m);
+        let lane = closest_lane(&ta, &ids, m);
         let mut da = [0.0f32; W];
         let mut va = [0.0f32; W];
         let mut wa = [0.0f32; W];
@@ -196,7 +189,7 @@ unsafe fn tri8_test<const ANY: bool>(a: &Tri4, b: &Tri4, r: &RayData, tmax: f32)
         _mm256_storeu_ps(va.as_mut_ptr(), v);
         _mm256_storeu_ps(wa.as_mut_ptr(), w);
         let inv = 1.0 / da[lane];
-        let id = if lane < 4 { a.id[lane] } else { b.id[lane - 4] };
+        let id = ids[lane];
         Some((ta[lane], id, va[lane] * inv, wa[lane] * inv))
     }
 }

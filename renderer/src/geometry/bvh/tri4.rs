@@ -16,14 +16,17 @@ pub(super) struct Tri4 {
     pub(super) id: [u32; 4],
 }
 
-/// Closest of the four triangles of `blk` hit in (0, tmax): (t, triangle index, b1, b2).
-/// Exactly the floating-point operations of `triangle::intersect`, four lanes at a time.
+/// Closest of the four triangles of `blk` hit in (0, tmax), or at exactly `tmax` with an index
+/// below `tie_id` (the closest hit so far; 0 where there is none): (t, triangle index, b1, b2).
+/// Of equal distances the lowest index wins, so the closest hit of a whole query does not depend
+/// on the order the blocks are tested in (see `triangle::RANGE_WIDEN`). Exactly the
+/// floating-point operations of `triangle::intersect`, four lanes at a time.
 #[inline(always)]
-pub(super) fn tri4_test(blk: &Tri4, r: &RayData, tmax: f32) -> Option<HitRec> {
-    match tri4_fast::<false>(blk, r, tmax) {
+pub(super) fn tri4_test(blk: &Tri4, r: &RayData, tmax: f32, tie_id: u32) -> Option<HitRec> {
+    match tri4_fast::<false>(blk, r, tmax, tie_id) {
         Tri4Result::Miss => None,
         Tri4Result::Hit(h) => Some(h),
-        Tri4Result::EdgeZero => tri4_scalar(blk, r, tmax),
+        Tri4Result::EdgeZero => tri4_scalar(blk, r, tmax, tie_id),
     }
 }
 
@@ -45,7 +48,7 @@ pub(super) enum Tri4Result {
 /// With `ANY` a hit is `ANY_HIT`: an any-hit query only asks whether there is one, so the
 /// closest lane, its division and its barycentrics are skipped.
 #[inline(always)]
-pub(super) fn tri4_fast<const ANY: bool>(blk: &Tri4, r: &RayData, tmax: f32) -> Tri4Result {
+pub(super) fn tri4_fast<const ANY: bool>(blk: &Tri4, r: &RayData, tmax: f32, tie_id: u32) -> Tri4Result {
     let [kx, ky, kz] = r.k;
     let [sx, sy, sz] = r.s;
     let sheared = |v: &[Vec4; 3]| {
@@ -72,12 +75,17 @@ pub(super) fn tri4_fast<const ANY: bool>(blk: &Tri4, r: &RayData, tmax: f32) -> 
     let tmax4 = Vec4::splat(tmax);
     // Most blocks are missed, which the tests without the division decide: the division is
     // only on the path of a possible hit.
-    let ok = !(neg & pos) & dabs.cmpgt(zero) & dabs.cmplt(Vec4::INFINITY) & ts.cmpgt(zero) & ts.cmplt(tmax4 * dabs);
+    let tw = Vec4::splat(tmax * triangle::RANGE_WIDEN);
+    let ok = !(neg & pos) & dabs.cmpgt(zero) & dabs.cmplt(Vec4::INFINITY) & ts.cmpgt(zero) & ts.cmplt(tw * dabs);
     if !ok.any() {
         return Tri4Result::Miss;
     }
     let t = t_scaled / det;
-    let m = (ok & t.cmpgt(zero) & t.cmplt(tmax4)).bitmask();
+    let ahead = ok & t.cmpgt(zero);
+    let mut m = (ahead & t.cmplt(tmax4)).bitmask();
+    if !ANY {
+        m |= ties(&blk.id, (ahead & t.cmpeq(tmax4)).bitmask(), tie_id);
+    }
     if m == 0 {
         return Tri4Result::Miss;
     }
@@ -85,31 +93,46 @@ pub(super) fn tri4_fast<const ANY: bool>(blk: &Tri4, r: &RayData, tmax: f32) -> 
         return Tri4Result::Hit(ANY_HIT);
     }
     let ta = t.to_array();
-    let lane = closest_lane(&ta, m);
+    let lane = closest_lane(&ta, &blk.id, m);
     let inv = 1.0 / det.to_array()[lane];
     Tri4Result::Hit((ta[lane], blk.id[lane], v.to_array()[lane] * inv, w.to_array()[lane] * inv))
 }
 
-/// The lane set in `m` (bit i: lane i) with the smallest `t`; of equal ones the lowest, as
-/// when the lanes are tested one after another against a shrinking `tmax`.
+/// The lane set in `m` (bit i: lane i) with the smallest `t`; of equal ones the one with the
+/// lowest triangle index `id`.
 #[inline(always)]
-pub(super) fn closest_lane(t: &[f32], mut m: u32) -> usize {
+pub(super) fn closest_lane(t: &[f32], id: &[u32], mut m: u32) -> usize {
     let mut lane = m.trailing_zeros() as usize;
     m &= m - 1;
     while m != 0 {
         let l = m.trailing_zeros() as usize;
         m &= m - 1;
-        if t[l] < t[lane] {
+        if t[l] < t[lane] || (t[l] == t[lane] && id[l] < id[lane]) {
             lane = l;
         }
     }
     lane
 }
 
+/// Of the lanes in `eq` (hit at exactly the closest distance so far), those whose triangle
+/// index is below `tie_id`, the closest hit's.
+#[inline(always)]
+pub(super) fn ties(id: &[u32], mut eq: u32, tie_id: u32) -> u32 {
+    let mut m = 0;
+    while eq != 0 {
+        let l = eq.trailing_zeros();
+        eq &= eq - 1;
+        if id[l as usize] < tie_id {
+            m |= 1 << l;
+        }
+    }
+    m
+}
+
 /// `tri4_test` one lane at a time through the scalar watertight test (which recomputes edge
 /// functions that round to zero in f64).
 #[inline(never)]
-pub(super) fn tri4_scalar(blk: &Tri4, r: &RayData, mut tmax: f32) -> Option<HitRec> {
+pub(super) fn tri4_scalar(blk: &Tri4, r: &RayData, mut tmax: f32, mut tie_id: u32) -> Option<HitRec> {
     let [kx, ky, kz] = r.k;
     let [sx, sy, sz] = r.ss;
     let o = Vec3::new(r.o[0].x, r.o[1].x, r.o[2].x);
@@ -120,9 +143,13 @@ pub(super) fn tri4_scalar(blk: &Tri4, r: &RayData, mut tmax: f32) -> Option<HitR
             let az = a[kz];
             [a[kx] - sx * az, a[ky] - sy * az, sz * az]
         };
-        if let Some((t, b1, b2)) = triangle::intersect_sheared(sheared(p(0)), sheared(p(1)), sheared(p(2)), tmax) {
-            tmax = t;
-            best = Some((t, blk.id[lane], b1, b2));
+        // Up to and including tmax, then the rule on ties.
+        if let Some((t, b1, b2)) = triangle::intersect_sheared(sheared(p(0)), sheared(p(1)), sheared(p(2)), tmax.next_up()) {
+            if t < tmax || blk.id[lane] < tie_id {
+                tmax = t;
+                tie_id = blk.id[lane];
+                best = Some((t, blk.id[lane], b1, b2));
+            }
         }
     }
     best

@@ -1,0 +1,295 @@
+//! Closest hits of up to sixteen rays at once on a small mesh, without a BVH: every triangle is
+//! tested against all the rays together, one ray per lane of a 512-bit register (AVX-512).
+//!
+//! On a mesh of a few dozen triangles (McGuire's Cornell box has 36) a BVH query is short but
+//! serial: the reciprocal's division, a node test, a sorted stack and the leaf tests, with
+//! branches on data between them, for ~1.4 node and ~1.6 block tests a ray. The wavefront
+//! integrator has many independent rays at a time; here each triangle costs about sixty vector
+//! operations for sixteen of them and nothing branches on the data but "did any lane pass"
+//! (docs/performance.md, "Sixteen rays against every triangle").
+//!
+//! Each lane performs exactly the scalar test's floating-point operations (Woop et al.'s
+//! watertight test, `triangle::intersect_sheared`, with `triangle::shear_axes`'s dominant
+//! axis), triangle after triangle against the closest hit so far, as a traversal does against
+//! its shrinking `tmax` (strictly closer, so of hits at exactly the same distance the lowest
+//! triangle index stays, as the BVH's rule is). The lane's own axes are picked by a permute of the triangle's nine
+//! coordinates. One difference from `shear_axes` changes nothing: the two other axes are not
+//! swapped for a negative dominant component. Swapping them negates u, v, w, their sum and
+//! `t_scaled` exactly (rounding is symmetric), which leaves t and the barycentrics as they are.
+//! With the range test before the division widened as the BVH's (`triangle::RANGE_WIDEN`), a
+//! hit agrees with the BVH's bit for bit. A lane in which
+//! an edge function rounds to zero is answered by the BVH (whose scalar fallback redoes such
+//! edges in f64).
+
+use super::{bvh::Bvh, triangle, Hit};
+use crate::math::Ray;
+use glam::{Vec2, Vec3};
+
+/// Largest mesh given a packet query. The cost is linear in the triangles; on the Cornell box
+/// (36) a ray costs 0.6–0.7× a BVH query (`examples/packet_ab.rs`, docs/performance.md), so
+/// about 50 triangles would break even. Only 36 was measured.
+pub const PACKET_MAX: usize = 48;
+
+/// Rays per packet.
+pub const WIDTH: usize = 16;
+
+/// Fewest rays `Accel::intersect_live` sends as a packet: a packet costs about the same for one
+/// ray as for sixteen, about what 10 BVH queries cost on the Cornell box.
+pub const MIN_LANES: usize = 8;
+
+/// One triangle's vertices (x, y, z of each, then padding): one 64-byte load, from which each
+/// lane permutes out its own axes.
+#[derive(Clone, Copy)]
+#[repr(C, align(64))]
+struct Tri([f32; 16]);
+
+/// The mesh in packet form: its valid triangles in their original order, with their indices.
+pub struct Packets {
+    tris: Vec<Tri>,
+    ids: Vec<u32>,
+}
+
+impl Packets {
+    /// `None` for a mesh of more than `PACKET_MAX` triangles or a CPU without AVX-512 F.
+    /// `tris` are the valid triangles' vertices and `valid` their indices, as `Bvh::build`
+    /// takes them.
+    pub fn new(tris: &[[Vec3; 3]], valid: &[u32]) -> Option<Packets> {
+        if tris.is_empty() || tris.len() > PACKET_MAX || !has_avx512() {
+            return None;
+        }
+        let tris = tris
+            .iter()
+            .map(|t| {
+                let mut a = [0.0f32; 16];
+                for (v, p) in t.iter().enumerate() {
+                    a[3 * v..3 * v + 3].copy_from_slice(&p.to_array());
+                }
+                Tri(a)
+            })
+            .collect();
+        Some(Packets { tris, ids: valid.to_vec() })
+    }
+
+    /// Closest hits with t in (0, tmax) of `rays` (at most `WIDTH`) into `out`; lanes the
+    /// vector test cannot decide go to `bvh`.
+    pub fn intersect(&self, bvh: &Bvh, rays: &[Ray], tmax: f32, out: &mut [Option<Hit>]) {
+        assert!(rays.len() <= WIDTH && out.len() >= rays.len());
+        #[cfg(target_arch = "x86_64")]
+        {
+            let mut res = Lanes::default();
+            // SAFETY: a `Packets` exists only where `has_avx512` found AVX-512 F.
+            let redo = unsafe { self.intersect_avx512(rays, tmax, &mut res) };
+            for (i, r) in rays.iter().enumerate() {
+                out[i] = if redo & (1 << i) != 0 {
+                    bvh.intersect(r.origin, r.dir, tmax).map(|(t, prim, b1, b2)| Hit { t, prim, bary: Vec2::new(b1, b2) })
+                } else if res.id[i] >= 0 {
+                    Some(Hit { t: res.t[i], prim: self.ids[res.id[i] as usize], bary: Vec2::new(res.b1[i], res.b2[i]) })
+                } else {
+                    None
+                };
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let _ = (bvh, rays, tmax, out);
+            unreachable!("Packets::new makes none without AVX-512");
+        }
+    }
+}
+
+fn has_avx512() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::is_x86_feature_detected!("avx512f")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// What the vector test found per lane: distance, barycentrics and the triangle's position in
+/// `Packets::tris` (−1: no hit).
+#[derive(Default)]
+struct Lanes {
+    t: [f32; WIDTH],
+    b1: [f32; WIDTH],
+    b2: [f32; WIDTH],
+    id: [i32; WIDTH],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Packets {
+    /// The vector test; returns the lanes (bit i: ray i) it left undecided, where an edge
+    /// function rounded to zero.
+    ///
+    /// # Safety
+    /// Only where the CPU has AVX-512 F.
+    #[target_feature(enable = "avx512f")]
+    unsafe fn intersect_avx512(&self, rays: &[Ray], tmax: f32, res: &mut Lanes) -> u16 {
+        use std::arch::x86_64::*;
+        // Per lane: origin in the lane's axis order (kx, ky, kz), dominant axis, shear factors.
+        let mut o = [[0.0f32; WIDTH]; 3];
+        let mut kz = [0i32; WIDTH];
+        let mut s = [[0.0f32; WIDTH]; 3];
+        let mut active: u16 = 0;
+        if tmax > 0.0 {
+            for (i, r) in rays.iter().enumerate() {
+                // As `RayData::new`: no hit for a non-finite origin or direction, nor for a
+                // direction without a dominant component.
+                if !(r.origin.is_finite() && r.dir.is_finite()) {
+                    continue;
+                }
+                let Some(([_, _, z], [_, _, sz])) = triangle::shear_axes(r.dir) else { continue };
+                let (x, y) = ((z + 1) % 3, (z + 2) % 3);
+                let (oa, d) = (r.origin.to_array(), r.dir.to_array());
+                o[0][i] = oa[x];
+                o[1][i] = oa[y];
+                o[2][i] = oa[z];
+                kz[i] = z as i32;
+                s[0][i] = d[x] * sz;
+                s[1][i] = d[y] * sz;
+                s[2][i] = sz;
+                active |= 1 << i;
+            }
+        }
+        // SAFETY (whole block): AVX-512 F is present (the caller's contract); every load and
+        // store reads or writes a whole array of sixteen 4-byte elements.
+        unsafe {
+            let kzv = _mm512_loadu_si512(kz.as_ptr() as *const _);
+            let one = _mm512_set1_epi32(1);
+            let three = _mm512_set1_epi32(3);
+            // (kz + 1) mod 3 and (kz + 2) mod 3, kz in 0..3.
+            let wrap = |a: __m512i| _mm512_mask_sub_epi32(a, _mm512_cmpge_epi32_mask(a, three), a, three);
+            let kxv = wrap(_mm512_add_epi32(kzv, one));
+            let kyv = wrap(_mm512_add_epi32(kxv, one));
+            let at = |vertex: i32, k: __m512i| _mm512_add_epi32(k, _mm512_set1_epi32(3 * vertex));
+            let ix = [at(0, kxv), at(1, kxv), at(2, kxv)];
+            let iy = [at(0, kyv), at(1, kyv), at(2, kyv)];
+            let iz = [at(0, kzv), at(1, kzv), at(2, kzv)];
+            let (ox, oy, oz) = (_mm512_loadu_ps(o[0].as_ptr()), _mm512_loadu_ps(o[1].as_ptr()), _mm512_loadu_ps(o[2].as_ptr()));
+            let (sx, sy, sz) = (_mm512_loadu_ps(s[0].as_ptr()), _mm512_loadu_ps(s[1].as_ptr()), _mm512_loadu_ps(s[2].as_ptr()));
+            let zero = _mm512_setzero_ps();
+            let sign = _mm512_set1_epi32(i32::MIN);
+            let inf = _mm512_set1_ps(f32::INFINITY);
+            let mut best_t = _mm512_set1_ps(tmax);
+            // `best_t · RANGE_WIDEN`, for the range test before the division.
+            let widen = _mm512_set1_ps(triangle::RANGE_WIDEN);
+            let mut best_tw = _mm512_set1_ps(tmax * triangle::RANGE_WIDEN);
+            let mut best_id = _mm512_set1_epi32(-1);
+            let (mut best_det, mut best_v, mut best_w) = (zero, zero, zero);
+            let mut redo: u16 = 0;
+            for (j, tri) in self.tris.iter().enumerate() {
+                let tv = _mm512_load_ps(tri.0.as_ptr());
+                // `triangle::intersect`'s sheared vertex: a[kx] − sx·a[kz], a[ky] − sy·a[kz],
+                // sz·a[kz], with a = p − origin.
+                let sheared = |v: usize| {
+                    let az = _mm512_sub_ps(_mm512_permutexvar_ps(iz[v], tv), oz);
+                    let x = _mm512_sub_ps(_mm512_sub_ps(_mm512_permutexvar_ps(ix[v], tv), ox), _mm512_mul_ps(sx, az));
+                    let y = _mm512_sub_ps(_mm512_sub_ps(_mm512_permutexvar_ps(iy[v], tv), oy), _mm512_mul_ps(sy, az));
+                    (x, y, _mm512_mul_ps(sz, az))
+                };
+                let (ax, ay, az) = sheared(0);
+                let (bx, by, bz) = sheared(1);
+                let (cx, cy, cz) = sheared(2);
+                let u = _mm512_sub_ps(_mm512_mul_ps(cx, by), _mm512_mul_ps(cy, bx));
+                let v = _mm512_sub_ps(_mm512_mul_ps(ax, cy), _mm512_mul_ps(ay, cx));
+                let w = _mm512_sub_ps(_mm512_mul_ps(bx, ay), _mm512_mul_ps(by, ax));
+                let edge_zero = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(u, zero)
+                    | _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(v, zero)
+                    | _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(w, zero);
+                redo |= edge_zero & active;
+                // With no function zero, "some negative and some positive" is "the sign bits
+                // differ": (u ^ v) | (u ^ w) has its sign bit set (ternary-logic table 0x7E).
+                let (ui, vi, wi) = (_mm512_castps_si512(u), _mm512_castps_si512(v), _mm512_castps_si512(w));
+                let mixed = _mm512_test_epi32_mask(_mm512_ternarylogic_epi32::<0x7E>(ui, vi, wi), sign);
+                let det = _mm512_add_ps(_mm512_add_ps(u, v), w);
+                let t_scaled = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(u, az), _mm512_mul_ps(v, bz)), _mm512_mul_ps(w, cz));
+                // ts = −t_scaled and d = −det where det < 0: flipping the sign bit.
+                let det_sign = _mm512_and_si512(_mm512_castps_si512(det), sign);
+                let ts = _mm512_castsi512_ps(_mm512_xor_si512(_mm512_castps_si512(t_scaled), det_sign));
+                let d = _mm512_castsi512_ps(_mm512_andnot_si512(sign, _mm512_castps_si512(det)));
+                let pass = active
+                    & !edge_zero
+                    & !mixed
+                    & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(d, zero)
+                    & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(d, inf)
+                    & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(ts, zero)
+                    & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(ts, _mm512_mul_ps(best_tw, d));
+                // Most triangles are missed by every lane, which the tests without the
+                // division decide (a 512-bit division issues once per 16 cycles).
+                if pass != 0 {
+                    let t = _mm512_maskz_div_ps(pass, t_scaled, det);
+                    let hit = pass & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(t, zero) & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(t, best_t);
+                    best_t = _mm512_mask_mov_ps(best_t, hit, t);
+                    best_tw = _mm512_mask_mul_ps(best_tw, hit, t, widen);
+                    best_id = _mm512_mask_mov_epi32(best_id, hit, _mm512_set1_epi32(j as i32));
+                    best_det = _mm512_mask_mov_ps(best_det, hit, det);
+                    best_v = _mm512_mask_mov_ps(best_v, hit, v);
+                    best_w = _mm512_mask_mov_ps(best_w, hit, w);
+                }
+            }
+            // The barycentrics as the scalar test computes them: v and w times 1/det.
+            let inv = _mm512_div_ps(_mm512_set1_ps(1.0), best_det);
+            _mm512_storeu_ps(res.t.as_mut_ptr(), best_t);
+            _mm512_storeu_ps(res.b1.as_mut_ptr(), _mm512_mul_ps(best_v, inv));
+            _mm512_storeu_ps(res.b2.as_mut_ptr(), _mm512_mul_ps(best_w, inv));
+            _mm512_storeu_si512(res.id.as_mut_ptr() as *mut _, best_id);
+            redo
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench::RayBatch;
+    use crate::geometry::{Accel, Mesh};
+    use crate::rng::Pcg32;
+
+    fn check(mesh: &Mesh, batch: &RayBatch) -> usize {
+        let accel = Accel::build(mesh);
+        let Some(p) = accel.packets() else {
+            eprintln!("no packet query on this CPU (AVX-512 F missing) or mesh: nothing to compare");
+            return 0;
+        };
+        let rays: Vec<Ray> = (0..batch.len()).map(|i| batch.ray(i)).collect();
+        let mut hits = 0;
+        for (k, chunk) in rays.chunks(WIDTH).enumerate() {
+            // Every packet width, from a single lane to sixteen.
+            let chunk = &chunk[..chunk.len().min(1 + k % WIDTH)];
+            let mut out = [None; WIDTH];
+            p.intersect(&accel.bvh, chunk, f32::INFINITY, &mut out);
+            for (r, got) in chunk.iter().zip(out) {
+                let want = accel.intersect(r, f32::INFINITY);
+                let key = |h: Option<Hit>| h.map(|h| (h.t.to_bits(), h.prim, h.bary.x.to_bits(), h.bary.y.to_bits()));
+                assert_eq!(key(got), key(want), "ray {r:?}");
+                hits += got.is_some() as usize;
+            }
+        }
+        hits
+    }
+
+    /// The packet query answers as the BVH does, bit for bit: on the Cornell box's camera rays
+    /// (a quarter aimed at shared edges, where the f64 fallback decides) and random rays, and
+    /// on a soup of random triangles. Fails only on a CPU with AVX-512 F; elsewhere there is
+    /// no packet query to check.
+    #[test]
+    fn packets_equal_bvh_queries() {
+        let scene =
+            crate::scene::Scene::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box/scene.toml")).unwrap();
+        let mut hits = check(&scene.mesh, &RayBatch::camera(&scene.mesh, 40_000, 1));
+        hits += check(&scene.mesh, &RayBatch::random_in_bounds(&scene.mesh, 40_000, 2));
+        let mut rng = Pcg32::new(3, 0);
+        let mut soup = Mesh::default();
+        for _ in 0..40 {
+            let c = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0;
+            let p: Vec<Vec3> = (0..3).map(|_| c + Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5).collect();
+            soup.append(&p, &[], &[], &[[0, 1, 2]], 0);
+        }
+        hits += check(&soup, &RayBatch::random_in_bounds(&soup, 40_000, 4));
+        if has_avx512() {
+            assert!(hits > 30_000, "only {hits} hits");
+        }
+    }
+}
