@@ -19,7 +19,10 @@ fn main() {
     let path = std::env::args().nth(1).map(Into::into).unwrap_or_else(|| ws.join("scenes/cornell-box/scene.toml"));
     let scene = Scene::load(&path).expect("scene");
     if scene.accel.packets().is_none() {
-        eprintln!("no packet query for this scene on this CPU (more than {} triangles, or no AVX-512)", renderer::geometry::packet::PACKET_MAX);
+        eprintln!(
+            "no packet query for this scene on this CPU (more than {} triangles, or no AVX-512)",
+            renderer::geometry::packet::PACKET_MAX
+        );
         return;
     }
     let cam = &scene.camera;
@@ -35,7 +38,7 @@ fn main() {
                     let si = scene.surface(&r, &h);
                     let n = if si.ng.dot(r.dir) > 0.0 { -si.ng } else { si.ng };
                     let d = Frame::from_normal(n).to_world(renderer::sampling::square_to_cosine_hemisphere(rng.next_2d()));
-                    bounces.push(Ray::new(offset_ray_origin(si.p, si.ng, d), d));
+                    bounces.push(Ray::new(offset_ray_origin(si.p, si.ng, d, si.extent), d));
                 }
             }
         }

@@ -168,41 +168,27 @@ impl Accel {
     /// Closest hits with t in (0, tmax) of the rays `rays[i]` with `live[i]`, into `out[i]`
     /// (`None` for the others): through the packet query, sixteen rays at a time, where this
     /// mesh and CPU have one and at least `packet::MIN_LANES` rays are left; else one by one.
-    /// The same answers as [`Accel::intersect`], bit for bit.
+    /// The same answers as [`Accel::intersect`] (see `packet` for the one exception).
     #[inline]
     pub fn intersect_live(&self, rays: &[Ray], live: &[bool], tmax: f32, out: &mut [Option<Hit>]) {
-        let mut lanes = [0usize; packet::WIDTH];
-        let mut k = 0;
-        let mut left = live.iter().filter(|&&l| l).count();
-        for i in 0..rays.len() {
-            out[i] = None;
-            if !live[i] {
-                continue;
+        let Some(p) = &self.packets else {
+            for i in 0..rays.len() {
+                out[i] = if live[i] { self.intersect(&rays[i], tmax) } else { None };
             }
-            match &self.packets {
-                Some(p) if left >= packet::MIN_LANES || k > 0 => {
-                    lanes[k] = i;
-                    k += 1;
-                    left -= 1;
-                    if k == packet::WIDTH || left == 0 {
-                        let mut pr = [Ray::new(Vec3::ZERO, Vec3::Z); packet::WIDTH];
-                        let mut po = [None; packet::WIDTH];
-                        for (j, &l) in lanes[..k].iter().enumerate() {
-                            pr[j] = rays[l];
-                        }
-                        p.intersect(&self.bvh, &pr[..k], tmax, &mut po);
-                        for (j, &l) in lanes[..k].iter().enumerate() {
-                            out[l] = po[j];
-                        }
-                        k = 0;
-                    }
-                }
-                _ => {
-                    out[i] = self.intersect(&rays[i], tmax);
-                    left -= 1;
-                }
-            }
-        }
+            return;
+        };
+        out[..rays.len()].fill(None);
+        in_packets(
+            live,
+            |_, pr| {
+                let mut po = [None; packet::WIDTH];
+                p.intersect(&self.bvh, pr, tmax, &mut po);
+                po
+            },
+            |i| self.intersect(&rays[i], tmax),
+            rays,
+            out,
+        );
     }
 
     /// Any hit with t in (0, tmax) (shadow rays).
@@ -212,28 +198,74 @@ impl Accel {
     }
 }
 
+/// Sends the live lanes (`live[i]`) of `rays` to `packet(lanes, their rays)` sixteen at a time
+/// while at least `packet::MIN_LANES` are left, and the rest to `single(i)`; the answer for lane
+/// i goes to `out[i]`.
+#[inline(always)]
+fn in_packets<T: Copy>(
+    live: &[bool],
+    mut packet: impl FnMut(&[usize], &[Ray]) -> [T; packet::WIDTH],
+    mut single: impl FnMut(usize) -> T,
+    rays: &[Ray],
+    out: &mut [T],
+) {
+    let mut lanes = [0usize; packet::WIDTH];
+    let mut pr = [Ray::new(Vec3::ZERO, Vec3::Z); packet::WIDTH];
+    let mut k = 0;
+    let mut left = live.iter().filter(|&&l| l).count();
+    for i in 0..live.len() {
+        if !live[i] {
+            continue;
+        }
+        if left >= packet::MIN_LANES || k > 0 {
+            lanes[k] = i;
+            pr[k] = rays[i];
+            k += 1;
+            left -= 1;
+            if k == packet::WIDTH || left == 0 {
+                let res = packet(&lanes[..k], &pr[..k]);
+                for (j, &l) in lanes[..k].iter().enumerate() {
+                    out[l] = res[j];
+                }
+                k = 0;
+            }
+        } else {
+            out[i] = single(i);
+            left -= 1;
+        }
+    }
+}
+
 /// Integer ULP steps per unit of normal for coordinates far from zero (Wächter & Binder).
 const INT_SCALE: f32 = 256.0;
-/// Below this fraction of |p|∞ a coordinate's own ULPs are too fine to step over the rounding
-/// error of the other coordinates, so it gets a float offset instead.
+/// Below this fraction of the magnitude (see `offset_ray_origin`) a coordinate's own ULPs are
+/// too fine to step over the rounding error of the other coordinates, so it gets a float offset
+/// instead.
 const ORIGIN_FRACTION: f32 = 1.0 / 32.0;
-/// Float offset in units of |p|∞ for such coordinates. Wächter & Binder use a fixed 2^-16 below a
-/// fixed |p_i| < 1/32; that is 1.5% of a scene of size 1e-3, so both are made relative to |p|∞
-/// (identical to the paper for |p|∞ = 1).
+/// Float offset in units of the magnitude for such coordinates. Wächter & Binder use a fixed
+/// 2^-16 below a fixed |p_i| < 1/32; that is 1.5% of a scene of size 1e-3, so both are made
+/// relative to the magnitude (identical to the paper for a magnitude of 1).
 const FLOAT_SCALE: f32 = 1.0 / 65536.0;
-/// |p|∞ floor so a point at the exact origin still moves (about 1e-5 of a 1e-3-sized scene).
+/// Magnitude floor so a point at the exact origin of a degenerate scene still moves.
 const MIN_MAGNITUDE: f32 = 1e-8;
 
 /// Moves `p` off the surface along the geometric normal `ng` on the side of `dir`, by an amount
-/// that scales with |p| (Wächter & Binder, Ray Tracing Gems ch. 6), so spawned rays neither
-/// re-hit their own triangle nor tunnel through thin geometry at scene scales from 1e-3 to 1e4.
+/// that scales with the magnitude of the coordinates (Wächter & Binder, Ray Tracing Gems ch. 6),
+/// so spawned rays neither re-hit their own triangle nor tunnel through thin geometry at scene
+/// scales from 1e-3 to 1e4. `extent` is the largest vertex coordinate (in absolute value) of the
+/// triangle `p` lies on (`SurfaceHit::extent`): the rounding error of an interpolated hit point,
+/// and of the triangle test, is relative to the vertices, not to `p`, so the magnitude is the
+/// larger of |p|∞ and `extent`. (Relative to |p|∞ alone, a point 1e-4 from the world origin on a
+/// floor spanning ±1 moved by 6e-9, below the triangle test's ~1e-7 error there: the floor could
+/// be hit again at t ≈ 1e-7.)
 #[inline]
-pub fn offset_ray_origin(p: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
+pub fn offset_ray_origin(p: Vec3, ng: Vec3, dir: Vec3, extent: f32) -> Vec3 {
     if !p.is_finite() || !ng.is_finite() {
         return p;
     }
     let n = if ng.dot(dir) < 0.0 { -ng } else { ng };
-    let mag = p.abs().max_element().max(MIN_MAGNITUDE);
+    // `max` ignores a NaN extent.
+    let mag = p.abs().max_element().max(extent).max(MIN_MAGNITUDE);
     let near_zero = mag * ORIGIN_FRACTION;
     let float_step = FLOAT_SCALE * mag;
     Vec3::new(

@@ -236,6 +236,7 @@ fn offset_origin_avoids_self_hits_and_leaks() {
             let mesh = mesh_from(vec![p0, p1, p2], vec![[0, 1, 2]]);
             let accel = Accel::build(&mesh);
             let ng = mesh.geometric_normal(0);
+            let extent = p0.abs().max(p1.abs()).max(p2.abs()).max_element();
             for _ in 0..20_000 {
                 let (mut b1, mut b2) = (rng.next_f32(), rng.next_f32());
                 if b1 + b2 > 1.0 {
@@ -250,7 +251,7 @@ fn offset_origin_avoids_self_hits_and_leaks() {
                 if d.dot(ng).abs() < 1e-6 {
                     continue;
                 }
-                let o = offset_ray_origin(p, ng, d);
+                let o = offset_ray_origin(p, ng, d, extent);
                 let ray = Ray::new(o, d);
                 assert!(accel.intersect(&ray, f32::INFINITY).is_none(), "scale {scale}: self-hit from {p} dir {d}");
             }
@@ -274,8 +275,9 @@ fn offset_origin_avoids_self_hits_and_leaks() {
         for _ in 0..5_000 {
             let a = base + Vec3::new(rng.next_f32() * 0.8 + 0.1, rng.next_f32() * 0.8 + 0.1, 0.0) * scale;
             let b = base + Vec3::new(rng.next_f32() * 0.8 + 0.1, rng.next_f32() * 0.8 + 0.1, 0.0) * scale + Vec3::Z * gap;
-            let oa = offset_ray_origin(a, Vec3::Z, b - a);
-            let ob = offset_ray_origin(b, Vec3::NEG_Z, oa - b);
+            let ext = |v: &[Vec3; 4]| v.iter().map(|p| p.abs().max_element()).fold(0.0, f32::max);
+            let oa = offset_ray_origin(a, Vec3::Z, b - a, ext(&lo));
+            let ob = offset_ray_origin(b, Vec3::NEG_Z, oa - b, ext(&hi));
             // Both origins must stay inside the gap (no leaking out of it).
             assert!(oa.z > a.z && oa.z < b.z && ob.z < b.z && ob.z > a.z, "scale {scale}: offsets leave the gap");
             let d = ob - oa;
@@ -348,12 +350,12 @@ fn avx2_and_sse2_node_tests_agree() {
 
 /// `offset_ray_origin` as it was before it became branch-free (with the wrapping integer
 /// arithmetic of a release build spelled out), the reference the new one must match bit for bit.
-fn offset_ray_origin_reference(p: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
+fn offset_ray_origin_reference(p: Vec3, ng: Vec3, dir: Vec3, extent: f32) -> Vec3 {
     if !p.is_finite() || !ng.is_finite() {
         return p;
     }
     let n = if ng.dot(dir) < 0.0 { -ng } else { ng };
-    let mag = p.abs().max_element().max(MIN_MAGNITUDE);
+    let mag = p.abs().max_element().max(extent).max(MIN_MAGNITUDE);
     let mut out = p;
     for i in 0..3 {
         let pi = p[i];
@@ -421,7 +423,8 @@ fn offset_origin_is_bit_identical_to_the_branching_version() {
             (rand3(&mut rng) - 0.5).normalize_or_zero()
         };
         let dir = Vec3::new(value(&mut rng), value(&mut rng), value(&mut rng));
-        let (new, old) = (offset_ray_origin(p, ng, dir), offset_ray_origin_reference(p, ng, dir));
+        let extent = if rng.below(2) == 0 { value(&mut rng).abs() } else { 0.0 };
+        let (new, old) = (offset_ray_origin(p, ng, dir, extent), offset_ray_origin_reference(p, ng, dir, extent));
         let bits = |v: Vec3| v.to_array().map(f32::to_bits);
         assert_eq!(bits(new), bits(old), "p {p:?} ng {ng:?} dir {dir:?}");
         checked += (p.is_finite() && ng.is_finite()) as u32;
@@ -463,4 +466,45 @@ fn negative_zero_direction_components_hit_like_positive_zero() {
         }
     }
     assert_eq!(hits, 8000);
+}
+
+/// Rays spawned from points within 1e-3 of the world origin on a tilted triangle through it,
+/// whose vertices lie at distance ~1: neither the BVH nor the packet query may find the triangle
+/// again. The hit point's error is relative to the vertices (~1e-7 here), so an offset relative
+/// to |p| alone (~1e-11 for |p| ~ 1e-6) let the triangle be re-hit.
+#[test]
+fn offset_origin_near_the_world_origin_avoids_self_hits() {
+    let (v0, v1, v2) = (Vec3::new(-1.0, -0.8, 0.3), Vec3::new(1.1, -0.5, -0.4), Vec3::new(0.2, 0.9, 0.5));
+    let q = v0 * 0.4 + v1 * 0.3 + v2 * 0.3;
+    let (p0, p1, p2) = (v0 - q, v1 - q, v2 - q);
+    let mesh = mesh_from(vec![p0, p1, p2], vec![[0, 1, 2]]);
+    let accel = Accel::build(&mesh);
+    let ng = mesh.geometric_normal(0);
+    let extent = p0.abs().max(p1.abs()).max(p2.abs()).max_element();
+    let mut rng = Pcg32::new(77, 1);
+    let (mut rays, mut hits) = (Vec::new(), 0);
+    for _ in 0..40_000 {
+        let eps = 10f32.powi(-(3 + rng.below(5) as i32));
+        let b1 = 0.3 + (rng.next_f32() - 0.5) * eps;
+        let b2 = 0.3 + (rng.next_f32() - 0.5) * eps;
+        let p = p0 * (1.0 - b1 - b2) + p1 * b1 + p2 * b2;
+        let mut d = (rand3(&mut rng) * 2.0 - 1.0).normalize();
+        if rng.next_f32() < 0.5 {
+            d = (d - ng * d.dot(ng) * 0.99).normalize();
+        }
+        if d.dot(ng).abs() < 1e-6 {
+            continue;
+        }
+        let ray = Ray::new(offset_ray_origin(p, ng, d, extent), d);
+        hits += accel.intersect(&ray, f32::INFINITY).is_some() as usize;
+        rays.push(ray);
+    }
+    // The packet query, where this CPU has one (AVX-512).
+    let mut out = [None; super::packet::WIDTH];
+    for chunk in rays.chunks(super::packet::WIDTH) {
+        accel.intersect_live(chunk, &[true; super::packet::WIDTH][..chunk.len()], f32::INFINITY, &mut out[..chunk.len()]);
+        hits += out[..chunk.len()].iter().filter(|h| h.is_some()).count();
+    }
+    assert!(rays.len() > 30_000);
+    assert_eq!(hits, 0, "self-hits near the world origin");
 }

@@ -160,7 +160,7 @@ pub fn trace(scene: &Scene, ray: Ray, rng: &mut Pcg32, max_bounces: u32, russian
                 let f = bsdf.eval_split(wo, wi);
                 let f = if bsdf.is_transmissive() || same_side { f } else { Default::default() };
                 if f.total().max_element() > 0.0 {
-                    let origin = offset_ray_origin(si.p, si.ng, ls.wi);
+                    let origin = offset_ray_origin(si.p, si.ng, ls.wi, si.extent);
                     let tmax =
                         if ls.dist.is_finite() { (si.p + ls.wi * ls.dist - origin).length() * (1.0 - SHADOW_EPS) } else { f32::INFINITY };
                     out.rays += 1;
@@ -223,7 +223,7 @@ pub fn trace(scene: &Scene, ray: Ray, rng: &mut Pcg32, max_bounces: u32, russian
         prev_pdf = s.pdf;
         prev_delta = s.lobe.kind == LobeKind::Specular;
         prev_p = si.p;
-        ray = Ray::new(offset_ray_origin(si.p, si.ng, wi_world), wi_world);
+        ray = Ray::new(offset_ray_origin(si.p, si.ng, wi_world, si.extent), wi_world);
 
         if russian_roulette && depth >= 3 {
             let q = (1.0 - beta.total().max_element()).clamp(0.05, 0.95);

@@ -84,6 +84,8 @@ struct Wave {
     l_s: V3,
     // Stage 1 → 2.
     p: V3,
+    /// `SurfaceHit::extent`, for the ray offsets.
+    extent: L,
     ng: V3,
     ns: V3,
     albedo: V3,
@@ -247,6 +249,7 @@ fn stage_hit(scene: &Scene, w: &mut Wave, rngs: &mut [Pcg32], out: &mut [LaneRes
             continue;
         }
         w.p.set(i, si.p);
+        w.extent[i] = si.extent;
         w.ng.set(i, si.ng);
         w.ns.set(i, si.ns);
         w.albedo.set(i, albedo);
@@ -308,7 +311,7 @@ fn stage_shade(w: &mut Wave) {
         let (f_d, f_o) = if same_side { (f_d, f_o) } else { (Vec3::ZERO, Vec3::ZERO) };
         let f_total = f_d + f_o;
         let shadow = alive & w.has_light[i] & conn & (f_total.max_element() > 0.0);
-        let origin = offset_ray_origin(p, ng0, l_wi);
+        let origin = offset_ray_origin(p, ng0, l_wi, w.extent[i]);
         let tmax = if l_dist.is_finite() { (p + l_wi * l_dist - origin).length() * (1.0 - SHADOW_EPS) } else { f32::INFINITY };
         let pdf_b = if eval_ok { wi.z * INV_PI } else { 0.0 };
         let pdf_b = if pdf_b.is_finite() && pdf_b > 0.0 { pdf_b } else { 0.0 };
@@ -360,7 +363,7 @@ fn stage_shade(w: &mut Wave) {
         let cont = alive & ok;
         w.cont[i] = cont;
         // Selects rather than a branch, so that the loop stays vectorisable.
-        let next_org = offset_ray_origin(p, ng0, wi_world);
+        let next_org = offset_ray_origin(p, ng0, wi_world, w.extent[i]);
         w.beta_d.set(i, if cont { nbeta_d } else { beta_d });
         w.beta_s.set(i, if cont { nbeta_s } else { beta_s });
         w.split_started[i] |= cont;
@@ -432,13 +435,13 @@ fn power_heuristic(pdf_a: f32, pdf_b: f32) -> f32 {
 /// the saturating conversion costs a compare-and-blend sequence per component (3% of the
 /// render); this is one `cvttps2dq`.
 #[inline(always)]
-fn offset_ray_origin(p: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
+fn offset_ray_origin(p: Vec3, ng: Vec3, dir: Vec3, extent: f32) -> Vec3 {
     const INT_SCALE: f32 = 256.0;
     const ORIGIN_FRACTION: f32 = 1.0 / 32.0;
     const FLOAT_SCALE: f32 = 1.0 / 65536.0;
     const MIN_MAGNITUDE: f32 = 1e-8;
     let n = if ng.dot(dir) < 0.0 { -ng } else { ng };
-    let mag = p.abs().max_element().max(MIN_MAGNITUDE);
+    let mag = p.abs().max_element().max(extent).max(MIN_MAGNITUDE);
     let near_zero = mag * ORIGIN_FRACTION;
     let float_step = FLOAT_SCALE * mag;
     let component = |pi: f32, ni: f32| {

@@ -81,6 +81,9 @@ pub struct SurfaceHit {
     pub uv: Vec2,
     pub prim: u32,
     pub material: u32,
+    /// Largest vertex coordinate of the triangle, in absolute value: the scale of `p`'s
+    /// rounding error, for `geometry::offset_ray_origin`.
+    pub extent: f32,
 }
 
 impl Scene {
@@ -139,8 +142,10 @@ impl Scene {
         let b0 = 1.0 - b1 - b2;
         let m = &self.mesh;
         // Barycentric interpolation is more precise than ray.at(t) far from the origin.
-        let p = m.positions[a] * b0 + m.positions[b] * b1 + m.positions[c] * b2;
+        let (pa, pb, pc) = (m.positions[a], m.positions[b], m.positions[c]);
+        let p = pa * b0 + pb * b1 + pc * b2;
         let p = if p.is_finite() { p } else { ray.at(hit.t) };
+        let extent = pa.abs().max(pb.abs()).max(pc.abs()).max_element();
         let ng = self.geometric_normals[i];
         let ns = if m.normals.is_empty() {
             ng
@@ -154,7 +159,7 @@ impl Scene {
             }
         };
         let uv = if m.uvs.is_empty() { Vec2::ZERO } else { m.uvs[a] * b0 + m.uvs[b] * b1 + m.uvs[c] * b2 };
-        SurfaceHit { p, ng, ns, uv, prim: hit.prim, material: m.material[i] }
+        SurfaceHit { p, ng, ns, uv, prim: hit.prim, material: m.material[i], extent }
     }
 }
 
