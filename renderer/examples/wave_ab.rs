@@ -60,7 +60,7 @@ fn main() {
             if b != reference {
                 let nd = b.iter().zip(&reference).filter(|(x, y)| x != y).count();
                 let first = b.iter().zip(&reference).position(|(x, y)| x != y).unwrap();
-                eprintln!(
+                panic!(
                     "variant {} differs in {nd} of {} channels, first at {first}: {} vs {}",
                     args[k],
                     b.len(),
