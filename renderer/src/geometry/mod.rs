@@ -79,8 +79,7 @@ pub struct Accel {
 }
 
 impl Accel {
-    /// Builds the BVH (in parallel). Degenerate triangles, and triangles with the same vertices
-    /// as an earlier one, are kept in the mesh but can never be hit.
+    /// Builds the BVH (in parallel). Degenerate triangles are kept in the mesh but can never be hit.
     pub fn build(mesh: &Mesh) -> Accel {
         Accel::build_with(mesh, bvh::build_params(mesh.triangles.len()))
     }
@@ -96,7 +95,6 @@ impl Accel {
         let n = mesh.positions.len();
         // Triangles with an out-of-range index, a non-finite vertex or zero area are left out
         // of the BVH entirely, so no traversal or build step ever sees them.
-        let mut seen = std::collections::HashSet::new();
         let (tris, valid): (Vec<[Vec3; 3]>, Vec<u32>) = mesh
             .triangles
             .iter()
@@ -104,15 +102,6 @@ impl Accel {
             .filter(|(_, t)| t.iter().all(|&v| (v as usize) < n))
             .map(|(i, t)| ([mesh.positions[t[0] as usize], mesh.positions[t[1] as usize], mesh.positions[t[2] as usize]], i as u32))
             .filter(|(p, _)| !triangle::is_degenerate(p[0], p[1], p[2]))
-            .filter(|(p, _)| {
-                // A triangle with the same three vertices as an earlier one is left out too:
-                // both would be hit at the same distance, and which one a query reported would
-                // depend on the order it tested them in, which differs between the BVH and the
-                // packet query (McGuire's Cornell box has three such pairs).
-                let mut key = p.map(|v| v.to_array().map(f32::to_bits));
-                key.sort_unstable();
-                seen.insert(key)
-            })
             .unzip();
         let packets = packet::Packets::new(&tris, &valid);
         Accel { bvh: bvh::Bvh::build(tris, valid, params, c_node), packets }
