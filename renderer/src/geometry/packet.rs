@@ -133,35 +133,55 @@ impl Packets {
     #[target_feature(enable = "avx512f")]
     unsafe fn query_avx512(&self, rays: &[Ray], tmax: &[f32; WIDTH], res: &mut Lanes) -> u16 {
         use std::arch::x86_64::*;
-        // Per lane: origin in the lane's axis order (kx, ky, kz), dominant axis, shear factors.
-        let mut o = [[0.0f32; WIDTH]; 3];
-        let mut kz = [0i32; WIDTH];
-        let mut s = [[0.0f32; WIDTH]; 3];
-        let mut active: u16 = 0;
-        {
-            for (i, r) in rays.iter().enumerate() {
-                // As `Bvh::intersect`: no hit for tmax ≤ 0 or NaN, a non-finite origin or
-                // direction, or a direction without a dominant component.
-                if !(tmax[i] > 0.0 && r.origin.is_finite() && r.dir.is_finite()) {
-                    continue;
-                }
-                let Some(([_, _, z], [_, _, sz])) = triangle::shear_axes(r.dir) else { continue };
-                let (x, y) = ((z + 1) % 3, (z + 2) % 3);
-                let (oa, d) = (r.origin.to_array(), r.dir.to_array());
-                o[0][i] = oa[x];
-                o[1][i] = oa[y];
-                o[2][i] = oa[z];
-                kz[i] = z as i32;
-                s[0][i] = d[x] * sz;
-                s[1][i] = d[y] * sz;
-                s[2][i] = sz;
-                active |= 1 << i;
+        // The rays in structure-of-arrays form (lanes past `rays.len()` stay zero: no direction).
+        let mut oa = [[0.0f32; WIDTH]; 3];
+        let mut da = [[0.0f32; WIDTH]; 3];
+        for (i, r) in rays.iter().enumerate() {
+            for axis in 0..3 {
+                oa[axis][i] = r.origin[axis];
+                da[axis][i] = r.dir[axis];
             }
         }
         // SAFETY (whole block): AVX-512 F is present (the caller's contract); every load and
         // store reads or writes a whole array of sixteen 4-byte elements.
         unsafe {
-            let kzv = _mm512_loadu_si512(kz.as_ptr() as *const _);
+            let zero = _mm512_setzero_ps();
+            let sign = _mm512_set1_epi32(i32::MIN);
+            let load = |a: &[f32; WIDTH]| _mm512_loadu_ps(a.as_ptr());
+            let (ox0, oy0, oz0) = (load(&oa[0]), load(&oa[1]), load(&oa[2]));
+            let (dx, dy, dz) = (load(&da[0]), load(&da[1]), load(&da[2]));
+            // Per lane, as `Bvh::intersect`: no hit for tmax ≤ 0 or NaN, or a non-finite origin
+            // or direction (0·x is 0 exactly for a finite x) …
+            let finite = |v: __m512| _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(_mm512_mul_ps(v, zero), zero);
+            let mut active = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(_mm512_loadu_ps(tmax.as_ptr()), zero)
+                & finite(ox0)
+                & finite(oy0)
+                & finite(oz0)
+                & finite(dx)
+                & finite(dy)
+                & finite(dz);
+            // … and the dominant axis kz of `triangle::shear_axes` (x over y over z on ties),
+            // with the others in cyclic order (kx, ky) = (kz + 1, kz + 2) mod 3, unswapped.
+            let abs = |v: __m512| _mm512_castsi512_ps(_mm512_andnot_si512(sign, _mm512_castps_si512(v)));
+            let (ax, ay, az) = (abs(dx), abs(dy), abs(dz));
+            let x_gt_y = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(ax, ay);
+            let kz_x = x_gt_y & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(ax, az);
+            let kz_y = !x_gt_y & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(ay, az);
+            // Component kz, kz + 1 and kz + 2 of a vector: (z, x, y) by default.
+            let pick = |x: __m512, y: __m512, z: __m512| {
+                let c = _mm512_mask_mov_ps(_mm512_mask_mov_ps(z, kz_x, x), kz_y, y);
+                let c1 = _mm512_mask_mov_ps(_mm512_mask_mov_ps(x, kz_x, y), kz_y, z);
+                let c2 = _mm512_mask_mov_ps(_mm512_mask_mov_ps(y, kz_x, z), kz_y, x);
+                (c1, c2, c)
+            };
+            let (dkx, dky, dkz) = pick(dx, dy, dz);
+            let (ox, oy, oz) = pick(ox0, oy0, oz0);
+            active &= _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(dkz, zero);
+            let active = active & ((1u32 << rays.len()) - 1) as u16;
+            let sz = _mm512_div_ps(_mm512_set1_ps(1.0), dkz);
+            let (sx, sy) = (_mm512_mul_ps(dkx, sz), _mm512_mul_ps(dky, sz));
+            let kzv =
+                _mm512_mask_mov_epi32(_mm512_mask_mov_epi32(_mm512_set1_epi32(2), kz_x, _mm512_set1_epi32(0)), kz_y, _mm512_set1_epi32(1));
             let one = _mm512_set1_epi32(1);
             let three = _mm512_set1_epi32(3);
             // (kz + 1) mod 3 and (kz + 2) mod 3, kz in 0..3.
@@ -172,10 +192,6 @@ impl Packets {
             let ix = [at(0, kxv), at(1, kxv), at(2, kxv)];
             let iy = [at(0, kyv), at(1, kyv), at(2, kyv)];
             let iz = [at(0, kzv), at(1, kzv), at(2, kzv)];
-            let (ox, oy, oz) = (_mm512_loadu_ps(o[0].as_ptr()), _mm512_loadu_ps(o[1].as_ptr()), _mm512_loadu_ps(o[2].as_ptr()));
-            let (sx, sy, sz) = (_mm512_loadu_ps(s[0].as_ptr()), _mm512_loadu_ps(s[1].as_ptr()), _mm512_loadu_ps(s[2].as_ptr()));
-            let zero = _mm512_setzero_ps();
-            let sign = _mm512_set1_epi32(i32::MIN);
             let inf = _mm512_set1_ps(f32::INFINITY);
             let mut best_t = _mm512_loadu_ps(tmax.as_ptr());
             // `best_t · RANGE_WIDEN`, for the range test before the division.
