@@ -166,62 +166,31 @@ impl Accel {
             }
             return;
         };
-        out[..rays.len()].fill(None);
-        in_packets(
-            live,
-            |_, pr| {
-                let mut po = [None; packet::WIDTH];
-                p.intersect(&self.bvh, pr, tmax, &mut po);
-                po
-            },
-            |i| self.intersect(&rays[i], tmax),
-            rays,
-            out,
-        );
+        let mut lanes = [0usize; packet::WIDTH];
+        let mut k = 0;
+        let mut left = live[..rays.len()].iter().filter(|&&l| l).count();
+        for i in 0..rays.len() {
+            if !live[i] {
+                out[i] = None;
+            } else if left >= packet::MIN_LANES || k > 0 {
+                lanes[k] = i;
+                k += 1;
+                left -= 1;
+                if k == packet::WIDTH || left == 0 {
+                    p.intersect_lanes(&self.bvh, rays, &lanes[..k], tmax, out);
+                    k = 0;
+                }
+            } else {
+                out[i] = self.intersect(&rays[i], tmax);
+                left -= 1;
+            }
+        }
     }
 
     /// Any hit with t in (0, tmax) (shadow rays).
     #[inline(always)]
     pub fn occluded(&self, ray: &Ray, tmax: f32) -> bool {
         self.bvh.occluded(ray.origin, ray.dir, tmax)
-    }
-}
-
-/// Sends the live lanes (`live[i]`) of `rays` to `packet(lanes, their rays)` sixteen at a time
-/// while at least `packet::MIN_LANES` are left, and the rest to `single(i)`; the answer for lane
-/// i goes to `out[i]`.
-#[inline(always)]
-fn in_packets<T: Copy>(
-    live: &[bool],
-    mut packet: impl FnMut(&[usize], &[Ray]) -> [T; packet::WIDTH],
-    mut single: impl FnMut(usize) -> T,
-    rays: &[Ray],
-    out: &mut [T],
-) {
-    let mut lanes = [0usize; packet::WIDTH];
-    let mut pr = [Ray::new(Vec3::ZERO, Vec3::Z); packet::WIDTH];
-    let mut k = 0;
-    let mut left = live.iter().filter(|&&l| l).count();
-    for i in 0..live.len() {
-        if !live[i] {
-            continue;
-        }
-        if left >= packet::MIN_LANES || k > 0 {
-            lanes[k] = i;
-            pr[k] = rays[i];
-            k += 1;
-            left -= 1;
-            if k == packet::WIDTH || left == 0 {
-                let res = packet(&lanes[..k], &pr[..k]);
-                for (j, &l) in lanes[..k].iter().enumerate() {
-                    out[l] = res[j];
-                }
-                k = 0;
-            }
-        } else {
-            out[i] = single(i);
-            left -= 1;
-        }
     }
 }
 

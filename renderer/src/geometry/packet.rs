@@ -31,15 +31,17 @@ use crate::math::Ray;
 use glam::{Vec2, Vec3};
 
 /// Largest mesh given a packet query. The cost is linear in the triangles; on the Cornell box
-/// (36) a ray costs 0.6–0.7× a BVH query (`examples/packet_ab.rs`, docs/performance.md), so
-/// about 50 triangles would break even. Only 36 was measured.
+/// (36) a ray costs 0.66–0.76× a BVH query (`examples/packet_ab.rs`: 42–46 against 60 ns for
+/// camera rays, 54–69 against 81–94 ns for bounce rays; docs/performance.md), so about 50
+/// triangles would break even. Only 36 was measured.
 pub const PACKET_MAX: usize = 48;
 
 /// Rays per packet.
 pub const WIDTH: usize = 16;
 
 /// Fewest rays `Accel::intersect_live` sends as a packet: a packet costs about the same for one
-/// ray as for sixteen, about what 10 BVH queries cost on the Cornell box.
+/// ray as for sixteen, about what 10 BVH queries cost on the Cornell box. 8 and 12 measured
+/// level in the wavefront (`wave_ab 2n 2`: 1.149 and 1.147–1.156).
 pub const MIN_LANES: usize = 8;
 
 /// One triangle's vertices (x, y, z of each, then padding): one 64-byte load, from which each
@@ -78,17 +80,26 @@ impl Packets {
     /// Closest hits with t in (0, tmax) of `rays` (at most `WIDTH`) into `out`; lanes the
     /// vector test cannot decide go to `bvh`.
     pub fn intersect(&self, bvh: &Bvh, rays: &[Ray], tmax: f32, out: &mut [Option<Hit>]) {
-        assert!(rays.len() <= WIDTH && out.len() >= rays.len());
+        assert!(rays.len() <= WIDTH);
+        let lanes: [usize; WIDTH] = std::array::from_fn(|i| i);
+        self.intersect_lanes(bvh, rays, &lanes[..rays.len()], tmax, out);
+    }
+
+    /// `intersect` of the rays `rays[l]` for l in `lanes` (at most `WIDTH`), into `out[l]`.
+    #[inline]
+    pub fn intersect_lanes(&self, bvh: &Bvh, rays: &[Ray], lanes: &[usize], tmax: f32, out: &mut [Option<Hit>]) {
+        assert!(lanes.len() <= WIDTH);
         #[cfg(target_arch = "x86_64")]
         {
             let mut res = Lanes::default();
             // SAFETY: a `Packets` exists only where `has_avx512` found AVX-512 F.
-            let redo = unsafe { self.query_avx512(rays, &[tmax; WIDTH], &mut res) };
-            for (i, r) in rays.iter().enumerate() {
-                out[i] = if redo & (1 << i) != 0 {
+            let redo = unsafe { self.query_avx512(rays, lanes, &[tmax; WIDTH], &mut res) };
+            for (j, &l) in lanes.iter().enumerate() {
+                out[l] = if redo & (1 << j) != 0 {
+                    let r = &rays[l];
                     bvh.intersect(r.origin, r.dir, tmax).map(|(t, prim, b1, b2)| Hit { t, prim, bary: Vec2::new(b1, b2) })
-                } else if res.id[i] >= 0 {
-                    Some(Hit { t: res.t[i], prim: self.ids[res.id[i] as usize], bary: Vec2::new(res.b1[i], res.b2[i]) })
+                } else if res.id[j] >= 0 {
+                    Some(Hit { t: res.t[j], prim: self.ids[res.id[j] as usize], bary: Vec2::new(res.b1[j], res.b2[j]) })
                 } else {
                     None
                 };
@@ -96,7 +107,7 @@ impl Packets {
         }
         #[cfg(not(target_arch = "x86_64"))]
         {
-            let _ = (bvh, rays, tmax, out);
+            let _ = (bvh, rays, lanes, tmax, out);
             unreachable!("Packets::new makes none without AVX-512");
         }
     }
@@ -131,15 +142,17 @@ impl Packets {
     /// # Safety
     /// Only where the CPU has AVX-512 F.
     #[target_feature(enable = "avx512f")]
-    unsafe fn query_avx512(&self, rays: &[Ray], tmax: &[f32; WIDTH], res: &mut Lanes) -> u16 {
+    unsafe fn query_avx512(&self, rays: &[Ray], lanes: &[usize], tmax: &[f32; WIDTH], res: &mut Lanes) -> u16 {
         use std::arch::x86_64::*;
-        // The rays in structure-of-arrays form (lanes past `rays.len()` stay zero: no direction).
+        // The rays in structure-of-arrays form (lanes past `lanes.len()` stay zero: no
+        // direction).
         let mut oa = [[0.0f32; WIDTH]; 3];
         let mut da = [[0.0f32; WIDTH]; 3];
-        for (i, r) in rays.iter().enumerate() {
+        for (j, &l) in lanes.iter().enumerate() {
+            let r = &rays[l];
             for axis in 0..3 {
-                oa[axis][i] = r.origin[axis];
-                da[axis][i] = r.dir[axis];
+                oa[axis][j] = r.origin[axis];
+                da[axis][j] = r.dir[axis];
             }
         }
         // SAFETY (whole block): AVX-512 F is present (the caller's contract); every load and
@@ -177,7 +190,7 @@ impl Packets {
             let (dkx, dky, dkz) = pick(dx, dy, dz);
             let (ox, oy, oz) = pick(ox0, oy0, oz0);
             active &= _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(dkz, zero);
-            let active = active & ((1u32 << rays.len()) - 1) as u16;
+            let active = active & ((1u32 << lanes.len()) - 1) as u16;
             let sz = _mm512_div_ps(_mm512_set1_ps(1.0), dkz);
             let (sx, sy) = (_mm512_mul_ps(dkx, sz), _mm512_mul_ps(dky, sz));
             let kzv =
