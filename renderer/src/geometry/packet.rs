@@ -9,22 +9,23 @@
 //! (docs/performance.md, "Sixteen rays against every triangle").
 //!
 //! Each lane performs exactly the scalar test's floating-point operations (Woop et al.'s
-//! watertight test, `triangle::intersect_sheared`, with `triangle::shear_axes`'s dominant
-//! axis), triangle after triangle against the closest hit so far, as a traversal does against
-//! its shrinking `tmax` (strictly closer, so of hits at exactly the same distance the lowest
-//! triangle index stays, as the BVH's rule is). The lane's own axes are picked by a permute of the triangle's nine
-//! coordinates. One difference from `shear_axes` changes nothing: the two other axes are not
-//! swapped for a negative dominant component. Swapping them negates u, v, w, their sum and
-//! `t_scaled` exactly (rounding is symmetric), which leaves t and the barycentrics as they are.
+//! watertight test, `triangle::intersect_sheared`, with `triangle::shear_axes`'s dominant axis),
+//! triangle after triangle against the closest hit so far, as a traversal does against its
+//! shrinking `tmax`; strictly closer, so that of hits at exactly the same distance the lowest
+//! triangle index stays, the BVH's rule. The lane's own axes are picked by a permute of the
+//! triangle's nine coordinates. One difference from `shear_axes` changes nothing: the two other
+//! axes are not swapped for a negative dominant component, which negates u, v, w, their sum and
+//! `t_scaled` exactly (rounding is symmetric) and leaves t and the barycentrics as they are. A
+//! lane in which an edge function rounds to zero is answered by the BVH (whose scalar fallback
+//! redoes such edges in f64).
+//!
 //! With the range test before the division widened as the BVH's (`triangle::RANGE_WIDEN`), a
 //! hit agrees with the BVH's bit for bit, with one exception: the BVH tests a triangle only if
 //! the ray enters its box, so a spurious hit that rounding could produce for a ray starting
-//! within the test's error (~1e-7 of the vertices' magnitude) of a triangle's plane, outside
-//! its box, is found here and not there. Ray origins are offset beyond that error
+//! within the test's error (~1e-7 of the vertices' magnitude) of a triangle's plane, outside its
+//! box, is found here and not there. Spawned rays start beyond that error
 //! (`geometry::offset_ray_origin`); in the Cornell box's 2.1 million paths of
-//! `SPP=32 wave_ab 2n 2` none differs. A lane in which
-//! an edge function rounds to zero is answered by the BVH (whose scalar fallback redoes such
-//! edges in f64).
+//! `SPP=32 wave_ab 2n 2` none differs.
 
 use super::{bvh::Bvh, triangle, Hit};
 use crate::math::Ray;
