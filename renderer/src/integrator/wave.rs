@@ -4,7 +4,9 @@
 //! bounce is three stages:
 //!
 //! 1. per path (scalar): the closest-hit query, surface geometry, emission found by the path,
-//!    the BSDF's albedo, the random numbers and the light selection;
+//!    the BSDF's albedo, the random numbers and the light selection; on a mesh with a packet
+//!    query (`geometry::packet`: at most 48 triangles, AVX-512) the live paths' closest hits
+//!    come first, sixteen at a time;
 //! 2. all lanes at once, branch-free: normal orientation, shading frame, the light point, the
 //!    connection, the BSDF value and densities, the MIS weight, the shadow ray, the BSDF sample
 //!    (its concentric disk map included), the new throughput and the next ray. Written as
