@@ -230,32 +230,34 @@ impl Packets {
                 let u = _mm512_sub_ps(_mm512_mul_ps(cx, by), _mm512_mul_ps(cy, bx));
                 let v = _mm512_sub_ps(_mm512_mul_ps(ax, cy), _mm512_mul_ps(ay, cx));
                 let w = _mm512_sub_ps(_mm512_mul_ps(bx, ay), _mm512_mul_ps(by, ax));
-                let edge_zero = _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(u, zero)
-                    | _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(v, zero)
-                    | _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(w, zero);
-                redo |= edge_zero & active;
+                // The tests below are compares masked by the previous one's result, so that the
+                // lanes' masks stay in mask registers (ANDed as `u16`s, they travelled through
+                // general registers and back, a dozen instructions a triangle).
+                // Lanes with no edge function zero; the others are the BVH's.
+                let nz = _mm512_mask_cmp_ps_mask::<_CMP_NEQ_UQ>(active, u, zero);
+                let nz = _mm512_mask_cmp_ps_mask::<_CMP_NEQ_UQ>(nz, v, zero);
+                let nz = _mm512_mask_cmp_ps_mask::<_CMP_NEQ_UQ>(nz, w, zero);
+                redo |= active ^ nz;
                 // With no function zero, "some negative and some positive" is "the sign bits
                 // differ": (u ^ v) | (u ^ w) has its sign bit set (ternary-logic table 0x7E).
                 let (ui, vi, wi) = (_mm512_castps_si512(u), _mm512_castps_si512(v), _mm512_castps_si512(w));
-                let mixed = _mm512_test_epi32_mask(_mm512_ternarylogic_epi32::<0x7E>(ui, vi, wi), sign);
+                let same = _mm512_mask_testn_epi32_mask(nz, _mm512_ternarylogic_epi32::<0x7E>(ui, vi, wi), sign);
                 let det = _mm512_add_ps(_mm512_add_ps(u, v), w);
                 let t_scaled = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(u, az), _mm512_mul_ps(v, bz)), _mm512_mul_ps(w, cz));
                 // ts = −t_scaled and d = −det where det < 0: flipping the sign bit.
                 let det_sign = _mm512_and_si512(_mm512_castps_si512(det), sign);
                 let ts = _mm512_castsi512_ps(_mm512_xor_si512(_mm512_castps_si512(t_scaled), det_sign));
                 let d = _mm512_castsi512_ps(_mm512_andnot_si512(sign, _mm512_castps_si512(det)));
-                let pass = active
-                    & !edge_zero
-                    & !mixed
-                    & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(d, zero)
-                    & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(d, inf)
-                    & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(ts, zero)
-                    & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(ts, _mm512_mul_ps(best_tw, d));
+                let pass = _mm512_mask_cmp_ps_mask::<_CMP_GT_OQ>(same, d, zero);
+                let pass = _mm512_mask_cmp_ps_mask::<_CMP_LT_OQ>(pass, d, inf);
+                let pass = _mm512_mask_cmp_ps_mask::<_CMP_GT_OQ>(pass, ts, zero);
+                let pass = _mm512_mask_cmp_ps_mask::<_CMP_LT_OQ>(pass, ts, _mm512_mul_ps(best_tw, d));
                 // Most triangles are missed by every lane, which the tests without the
                 // division decide (a 512-bit division issues once per 16 cycles).
                 if pass != 0 {
                     let t = _mm512_maskz_div_ps(pass, t_scaled, det);
-                    let hit = pass & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(t, zero) & _mm512_cmp_ps_mask::<_CMP_LT_OQ>(t, best_t);
+                    let hit = _mm512_mask_cmp_ps_mask::<_CMP_GT_OQ>(pass, t, zero);
+                    let hit = _mm512_mask_cmp_ps_mask::<_CMP_LT_OQ>(hit, t, best_t);
                     best_t = _mm512_mask_mov_ps(best_t, hit, t);
                     best_tw = _mm512_mask_mul_ps(best_tw, hit, t, widen);
                     best_id = _mm512_mask_mov_epi32(best_id, hit, _mm512_set1_epi32(j as i32));
