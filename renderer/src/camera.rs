@@ -34,6 +34,7 @@ impl FovAxis {
     }
 
     /// Length in pixels of the extent the field of view spans on a `width` × `height` image.
+    #[inline]
     pub fn span(self, width: f32, height: f32) -> f32 {
         match self {
             FovAxis::X => width,
@@ -95,6 +96,7 @@ impl Camera {
 
     /// Scale of the film's [-1, 1] coordinates to tangents, horizontally and vertically:
     /// multiplying `tan_half_fov` by these gives the tangents of the half-angles the image spans.
+    #[inline]
     fn extent_scale(&self) -> Vec2 {
         let (w, h) = (self.width as f32, self.height as f32);
         let span = self.fov_axis.span(w, h);
@@ -113,10 +115,47 @@ impl Camera {
     }
 
     /// Primary ray through film position `film` in pixels (x right, y down; (0,0) is the top-left corner).
+    #[inline]
     pub fn ray(&self, film: Vec2) -> Ray {
-        let s = self.extent_scale();
-        let sx = (2.0 * film.x / self.width as f32 - 1.0) * self.tan_half_fov * s.x;
-        let sy = (1.0 - 2.0 * film.y / self.height as f32) * self.tan_half_fov * s.y;
+        self.ray_maker().ray(film)
+    }
+
+    /// What `ray` computes once per camera, for many rays in a loop: a loop over `ray` itself
+    /// branches on `fov_axis` and divides twice for every ray, and does not vectorise.
+    #[inline]
+    pub fn ray_maker(&self) -> RayMaker {
+        RayMaker {
+            position: self.position,
+            right: self.right,
+            up: self.up,
+            forward: self.forward,
+            tan_half_fov: self.tan_half_fov,
+            scale: self.extent_scale(),
+            width: self.width as f32,
+            height: self.height as f32,
+        }
+    }
+}
+
+/// A camera's primary rays (`Camera::ray_maker`), with exactly `Camera::ray`'s operations.
+#[derive(Clone, Copy, Debug)]
+pub struct RayMaker {
+    position: Vec3,
+    right: Vec3,
+    up: Vec3,
+    forward: Vec3,
+    tan_half_fov: f32,
+    scale: Vec2,
+    width: f32,
+    height: f32,
+}
+
+impl RayMaker {
+    #[inline(always)]
+    pub fn ray(&self, film: Vec2) -> Ray {
+        let s = self.scale;
+        let sx = (2.0 * film.x / self.width - 1.0) * self.tan_half_fov * s.x;
+        let sy = (1.0 - 2.0 * film.y / self.height) * self.tan_half_fov * s.y;
         let dir = (self.forward + sx * self.right + sy * self.up).normalize();
         Ray::new(self.position, dir)
     }

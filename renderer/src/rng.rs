@@ -36,6 +36,15 @@ impl Pcg32 {
         Pcg32::new(a, b)
     }
 
+    /// The state and increment, for code that keeps many streams in arrays (`integrator::wave`).
+    pub(crate) fn parts(&self) -> (u64, u64) {
+        (self.state, self.inc)
+    }
+
+    pub(crate) fn from_parts(state: u64, inc: u64) -> Self {
+        Pcg32 { state, inc }
+    }
+
     pub fn next_u32(&mut self) -> u32 {
         let old = self.state;
         self.state = old.wrapping_mul(MULT).wrapping_add(self.inc);

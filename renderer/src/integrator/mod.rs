@@ -128,7 +128,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
         if batch.pixel.is_empty() {
             return;
         }
-        let lanes = wave::trace_batch(scene, &batch.ray, &mut batch.rng, opts.max_bounces, opts.russian_roulette);
+        let lanes = wave::trace_samples(scene, &batch.start, opts.seed, opts.max_bounces, opts.russian_roulette);
         for (&li, r) in batch.pixel.iter().zip(lanes.iter()) {
             let (mut radiance, mut diffuse) = (r.radiance, r.diffuse);
             t.rays += r.rays as u64;
@@ -144,8 +144,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
             }
         }
         batch.pixel.clear();
-        batch.ray.clear();
-        batch.rng.clear();
+        batch.start.clear();
     };
     let results: Vec<TileResult> = tiles
         .par_iter()
@@ -174,13 +173,10 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
                 for ly in 0..th {
                     for lx in 0..tw {
                         let (px, py) = (x0 + tx + lx, y0 + ty + ly);
-                        let pixel = py as u64 * cw as u64 + px as u64;
                         let li = (ly * tw + lx) as usize;
                         for s in 0..opts.spp {
-                            let (rng, ray) = start_sample(cam, opts, px, py, pixel, s);
                             batch.pixel.push(li);
-                            batch.ray.push(ray);
-                            batch.rng.push(rng);
+                            batch.start.push(wave::SampleStart { px, py, sample: opts.first_sample + s });
                             if batch.pixel.len() == wave::LANES {
                                 run_batch(&mut t, &mut batch);
                             }
@@ -275,16 +271,15 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
     Ok((frame, stats))
 }
 
-/// Samples waiting for `wave::trace_batch`: their pixel in the tile, camera ray and stream.
+/// Samples waiting for `wave::trace_samples`: their pixel in the tile, and where they start.
 #[derive(Default)]
 struct Batch {
     pixel: Vec<usize>,
-    ray: Vec<Ray>,
-    rng: Vec<Pcg32>,
+    start: Vec<wave::SampleStart>,
 }
 
-/// A sample's own random stream and its camera ray: the wavefront and the per-sample loop
-/// start every sample here, so both trace the same rays with the same streams.
+/// A sample's own random stream and its camera ray (`wave::trace_samples` makes them with the
+/// same operations, many at once, so both paths trace the same rays with the same streams).
 #[inline(always)]
 fn start_sample(cam: &Camera, opts: &RenderOptions, px: u32, py: u32, pixel: u64, s: u32) -> (Pcg32, Ray) {
     let mut rng = Pcg32::for_sample(opts.seed, pixel, (opts.first_sample + s) as u64);

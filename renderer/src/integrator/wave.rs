@@ -114,6 +114,72 @@ struct Wave {
     cont: B,
 }
 
+/// Where a sample starts: its pixel (x, y) in the whole image and its number in the pixel.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SampleStart {
+    pub px: u32,
+    pub py: u32,
+    pub sample: u32,
+}
+
+/// `trace_batch` of the samples `starts` (at most `LANES`) of a render seeded with `seed`:
+/// their streams and camera rays are made here, every lane at once, exactly as
+/// `integrator::start_sample` makes them one by one (`Pcg32::for_sample`, then the film
+/// position's two draws and `Camera::ray`).
+pub fn trace_samples(scene: &Scene, starts: &[SampleStart], seed: u64, max_bounces: u32, rr: bool) -> [LaneResult; LANES] {
+    assert!(starts.len() <= LANES);
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::is_x86_feature_detected as has;
+        if has!("avx512f") && has!("avx512vl") && has!("avx512dq") && has!("avx2") && has!("fma") {
+            // SAFETY: the CPU has the features (checked just above).
+            return unsafe { trace_samples_avx512(scene, starts, seed, max_bounces, rr) };
+        }
+        if has!("avx2") && has!("fma") {
+            // SAFETY: the CPU has AVX2 and FMA (checked just above).
+            return unsafe { trace_samples_avx2(scene, starts, seed, max_bounces, rr) };
+        }
+    }
+    trace_samples_impl(scene, starts, seed, max_bounces, rr)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,avx512f,avx512vl,avx512dq")]
+unsafe fn trace_samples_avx512(scene: &Scene, starts: &[SampleStart], seed: u64, max_bounces: u32, rr: bool) -> [LaneResult; LANES] {
+    trace_samples_impl(scene, starts, seed, max_bounces, rr)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn trace_samples_avx2(scene: &Scene, starts: &[SampleStart], seed: u64, max_bounces: u32, rr: bool) -> [LaneResult; LANES] {
+    trace_samples_impl(scene, starts, seed, max_bounces, rr)
+}
+
+#[inline(always)]
+fn trace_samples_impl(scene: &Scene, starts: &[SampleStart], seed: u64, max_bounces: u32, rr: bool) -> [LaneResult; LANES] {
+    let n = starts.len();
+    let cam = &scene.camera;
+    let maker = cam.ray_maker();
+    let (mut px, mut py, mut sample) = ([0u32; LANES], [0u32; LANES], [0u32; LANES]);
+    for (i, st) in starts.iter().enumerate() {
+        (px[i], py[i], sample[i]) = (st.px, st.py, st.sample);
+    }
+    // Every lane, the unused ones too, so that the loop has no branch and vectorises (a
+    // sample start costs about as much as a bounce's scalar stage did one by one).
+    let (mut state, mut inc) = ([0u64; LANES], [0u64; LANES]);
+    let mut dir = V3 { x: [0.0; LANES], y: [0.0; LANES], z: [0.0; LANES] };
+    for i in 0..LANES {
+        let pixel = py[i] as u64 * cam.width as u64 + px[i] as u64;
+        let mut rng = Pcg32::for_sample(seed, pixel, sample[i] as u64);
+        let film = Vec2::new(px[i] as f32, py[i] as f32) + rng.next_2d();
+        (state[i], inc[i]) = rng.parts();
+        dir.set(i, maker.ray(film).dir);
+    }
+    let rays: [Ray; LANES] = std::array::from_fn(|i| Ray::new(cam.position, dir.get(i)));
+    let mut rngs: [Pcg32; LANES] = std::array::from_fn(|i| Pcg32::from_parts(state[i], inc[i]));
+    trace_batch_impl(scene, &rays[..n], &mut rngs[..n], max_bounces, rr)
+}
+
 /// Traces `rays.len()` (at most `LANES`) camera rays with their random streams, as
 /// `path::trace` would one by one with a radiance-only request.
 pub fn trace_batch(scene: &Scene, rays: &[Ray], rngs: &mut [Pcg32], max_bounces: u32, russian_roulette: bool) -> [LaneResult; LANES] {
@@ -525,6 +591,32 @@ mod tests {
             let s = load(scene);
             check_against_trace(&s, false);
             check_against_trace(&s, true);
+        }
+    }
+
+    /// Samples started in the batch (`trace_samples`) trace what the same samples started one
+    /// by one (`Pcg32::for_sample`, `Camera::ray`) trace, bit for bit, for every batch length.
+    #[test]
+    fn samples_started_in_the_batch_equal_samples_started_alone() {
+        let s = load("scenes/cornell-box/scene.toml");
+        let cam = &s.camera;
+        for len in 1..=LANES {
+            let starts: Vec<SampleStart> = (0..len as u32)
+                .map(|j| SampleStart { px: (j * 37 + len as u32) % cam.width, py: (j * 11) % cam.height, sample: j % 3 + 1000 })
+                .collect();
+            let mut rays = Vec::new();
+            let mut rngs = Vec::new();
+            for st in &starts {
+                let mut rng = Pcg32::for_sample(9, st.py as u64 * cam.width as u64 + st.px as u64, st.sample as u64);
+                rays.push(cam.ray(Vec2::new(st.px as f32, st.py as f32) + rng.next_2d()));
+                rngs.push(rng);
+            }
+            let a = trace_samples(&s, &starts, 9, 5, true);
+            let b = trace_batch(&s, &rays, &mut rngs, 5, true);
+            for (x, y) in a[..len].iter().zip(&b[..len]) {
+                assert_eq!(x.radiance.to_array().map(f32::to_bits), y.radiance.to_array().map(f32::to_bits));
+                assert_eq!(x.rays, y.rays);
+            }
         }
     }
 
