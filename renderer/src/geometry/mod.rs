@@ -149,6 +149,11 @@ impl Accel {
         self.packets.as_ref()
     }
 
+    /// The BVH, for the packet query's undecided lanes (`packet::Packets::intersect_batch`).
+    pub fn bvh(&self) -> &bvh::Bvh {
+        &self.bvh
+    }
+
     /// Leaves the packet query out (for A/B benchmarks); returns whether there was one.
     pub fn drop_packets(&mut self) -> bool {
         self.packets.take().is_some()

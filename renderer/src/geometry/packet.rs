@@ -40,7 +40,7 @@ pub const PACKET_MAX: usize = 48;
 /// Rays per packet.
 pub const WIDTH: usize = 16;
 
-/// Fewest rays `Accel::intersect_live` sends as a packet: a packet costs about the same for one
+/// Fewest rays `Accel::intersect_live` and `Packets::intersect_batch` send as a packet: a packet costs about the same for one
 /// ray as for sixteen, about what 10 BVH queries cost on the Cornell box. 8 and 12 measured
 /// level in the wavefront (`wave_ab 2n 2`: 1.149 and 1.147–1.156).
 pub const MIN_LANES: usize = 8;
@@ -114,6 +114,57 @@ impl Packets {
     }
 }
 
+/// Rays of the wavefront integrator's batch (`integrator::wave::LANES`), in its layout.
+pub const BATCH: usize = 32;
+
+/// Closest hits of a batch's rays, one array a field: `prim[i]` is the triangle lane i hit,
+/// −1 for none (and for lanes that were not live).
+#[derive(Clone, Copy)]
+pub struct BatchHits {
+    pub t: [f32; BATCH],
+    pub prim: [i32; BATCH],
+    pub b1: [f32; BATCH],
+    pub b2: [f32; BATCH],
+}
+
+impl Default for BatchHits {
+    fn default() -> Self {
+        BatchHits { t: [0.0; BATCH], prim: [-1; BATCH], b1: [0.0; BATCH], b2: [0.0; BATCH] }
+    }
+}
+
+impl Packets {
+    /// Closest hits with t in (0, tmax) of the rays i with bit i of `live` set (origin
+    /// `org[axis][i]`, direction `dir[axis][i]`), into `out`: the live lanes are packed into
+    /// packets and their answers put back in place by AVX-512's compress, expand, gather and
+    /// scatter, with no pass over the lanes one by one. A packet of fewer than `MIN_LANES`
+    /// rays goes to `bvh` ray by ray, as do lanes the vector test cannot decide.
+    pub fn intersect_batch(&self, bvh: &Bvh, org: [&[f32; BATCH]; 3], dir: [&[f32; BATCH]; 3], live: u32, tmax: f32, out: &mut BatchHits) {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: a `Packets` exists only where `has_avx512` found AVX-512 F.
+        unsafe {
+            self.intersect_batch_avx512(bvh, org, dir, live, tmax, out)
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let _ = (bvh, org, dir, live, tmax, out);
+            unreachable!("Packets::new makes none without AVX-512");
+        }
+    }
+}
+
+/// `out`'s lane `l` from a BVH query.
+fn single(bvh: &Bvh, org: [&[f32; BATCH]; 3], dir: [&[f32; BATCH]; 3], l: usize, tmax: f32, out: &mut BatchHits) {
+    let o = Vec3::new(org[0][l], org[1][l], org[2][l]);
+    let d = Vec3::new(dir[0][l], dir[1][l], dir[2][l]);
+    match bvh.intersect(o, d, tmax) {
+        Some((t, prim, b1, b2)) => {
+            (out.t[l], out.prim[l], out.b1[l], out.b2[l]) = (t, prim as i32, b1, b2);
+        }
+        None => out.prim[l] = -1,
+    }
+}
+
 fn has_avx512() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
@@ -137,6 +188,95 @@ struct Lanes {
 
 #[cfg(target_arch = "x86_64")]
 impl Packets {
+    /// `intersect_batch`.
+    ///
+    /// # Safety
+    /// Only where the CPU has AVX-512 F.
+    #[target_feature(enable = "avx512f")]
+    unsafe fn intersect_batch_avx512(
+        &self,
+        bvh: &Bvh,
+        org: [&[f32; BATCH]; 3],
+        dir: [&[f32; BATCH]; 3],
+        live: u32,
+        tmax: f32,
+        out: &mut BatchHits,
+    ) {
+        use std::arch::x86_64::*;
+        out.prim = [-1; BATCH];
+        let halves = [live as u16, (live >> 16) as u16];
+        let counts = halves.map(|m| m.count_ones());
+        // SAFETY (whole block): AVX-512 F is present (the caller's contract); the loads read
+        // sixteen floats of 32-float arrays at 0 or 16, gathers and scatters index lanes of
+        // 32-element arrays (0..32, from the lane numbers) or `self.ids` (a triangle
+        // position the kernel found, below `self.tris.len()`).
+        unsafe {
+            let iota = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+            // Half h's live lanes, packed to the bottom: origin, direction, lane numbers.
+            let half = |h: usize| {
+                let m = halves[h];
+                let ld = |a: &[f32; BATCH]| _mm512_maskz_compress_ps(m, _mm512_loadu_ps(a.as_ptr().add(16 * h)));
+                let idx = _mm512_maskz_compress_epi32(m, _mm512_add_epi32(iota, _mm512_set1_epi32(16 * h as i32)));
+                ([ld(org[0]), ld(org[1]), ld(org[2])], [ld(dir[0]), ld(dir[1]), ld(dir[2])], idx)
+            };
+            let run = |o: [__m512; 3], d: [__m512; 3], idx: __m512i, count: u32, out: &mut BatchHits| {
+                if count == 0 {
+                    return;
+                }
+                let mut lane = [0i32; 16];
+                _mm512_storeu_si512(lane.as_mut_ptr() as *mut _, idx);
+                if (count as usize) < MIN_LANES {
+                    for &l in &lane[..count as usize] {
+                        single(bvh, org, dir, l as usize, tmax, out);
+                    }
+                    return;
+                }
+                let active = ((1u32 << count) - 1) as u16;
+                let k = self.kernel(o, d, active, _mm512_set1_ps(tmax));
+                let decided = active & !k.redo;
+                let hit = decided & _mm512_cmpge_epi32_mask(k.id, _mm512_setzero_si512());
+                let prim = _mm512_mask_i32gather_epi32::<4>(_mm512_set1_epi32(-1), hit, k.id, self.ids.as_ptr() as *const i32);
+                _mm512_mask_i32scatter_epi32::<4>(out.prim.as_mut_ptr(), decided, idx, prim);
+                _mm512_mask_i32scatter_ps::<4>(out.t.as_mut_ptr(), hit, idx, k.t);
+                _mm512_mask_i32scatter_ps::<4>(out.b1.as_mut_ptr(), hit, idx, k.b1);
+                _mm512_mask_i32scatter_ps::<4>(out.b2.as_mut_ptr(), hit, idx, k.b2);
+                let mut redo = k.redo & active;
+                while redo != 0 {
+                    let j = redo.trailing_zeros() as usize;
+                    redo &= redo - 1;
+                    single(bvh, org, dir, lane[j] as usize, tmax, out);
+                }
+            };
+            let (o0, d0, i0) = half(0);
+            let (o1, d1, i1) = half(1);
+            if counts[0] + counts[1] <= 16 {
+                // One packet: the high half's lanes expanded into the places after the low's.
+                let place = (((1u32 << counts[1]) - 1) << counts[0]) as u16;
+                let o = [0, 1, 2].map(|a| _mm512_mask_expand_ps(o0[a], place, o1[a]));
+                let d = [0, 1, 2].map(|a| _mm512_mask_expand_ps(d0[a], place, d1[a]));
+                run(o, d, _mm512_mask_expand_epi32(i0, place, i1), counts[0] + counts[1], out);
+            } else {
+                run(o0, d0, i0, counts[0], out);
+                run(o1, d1, i1, counts[1], out);
+            }
+        }
+    }
+}
+
+/// What `Packets::kernel` found per lane: distance, barycentrics, the triangle's position in
+/// `Packets::tris` (−1: no hit), and the lanes it left undecided, where an edge function
+/// rounded to zero.
+#[cfg(target_arch = "x86_64")]
+struct KernelOut {
+    t: std::arch::x86_64::__m512,
+    b1: std::arch::x86_64::__m512,
+    b2: std::arch::x86_64::__m512,
+    id: std::arch::x86_64::__m512i,
+    redo: u16,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Packets {
     /// The vector test, lane i in (0, tmax[i]). Returns the lanes (bit i: ray i) it left
     /// undecided, where an edge function rounded to zero.
     ///
@@ -156,18 +296,49 @@ impl Packets {
                 da[axis][j] = r.dir[axis];
             }
         }
-        // SAFETY (whole block): AVX-512 F is present (the caller's contract); every load and
-        // store reads or writes a whole array of sixteen 4-byte elements.
+        // SAFETY: AVX-512 F is present (the caller's contract); every load and store reads or
+        // writes a whole array of sixteen 4-byte elements.
+        unsafe {
+            let load = |a: &[f32; WIDTH]| _mm512_loadu_ps(a.as_ptr());
+            let o = [load(&oa[0]), load(&oa[1]), load(&oa[2])];
+            let d = [load(&da[0]), load(&da[1]), load(&da[2])];
+            let active = ((1u32 << lanes.len()) - 1) as u16;
+            let k = self.kernel(o, d, active, _mm512_loadu_ps(tmax.as_ptr()));
+            _mm512_storeu_ps(res.t.as_mut_ptr(), k.t);
+            _mm512_storeu_ps(res.b1.as_mut_ptr(), k.b1);
+            _mm512_storeu_ps(res.b2.as_mut_ptr(), k.b2);
+            _mm512_storeu_si512(res.id.as_mut_ptr() as *mut _, k.id);
+            k.redo
+        }
+    }
+
+    /// The vector test of the rays in the lanes of `active` (origins `o`, directions `d`, one
+    /// axis a register), lane i in (0, tmax[i]).
+    ///
+    /// # Safety
+    /// Only where the CPU has AVX-512 F.
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    unsafe fn kernel(
+        &self,
+        o: [std::arch::x86_64::__m512; 3],
+        d: [std::arch::x86_64::__m512; 3],
+        active: u16,
+        tmax: std::arch::x86_64::__m512,
+    ) -> KernelOut {
+        use std::arch::x86_64::*;
+        // SAFETY (whole block): AVX-512 F is present (the caller's contract); every load
+        // reads a whole 64-byte triangle.
         unsafe {
             let zero = _mm512_setzero_ps();
             let sign = _mm512_set1_epi32(i32::MIN);
-            let load = |a: &[f32; WIDTH]| _mm512_loadu_ps(a.as_ptr());
-            let (ox0, oy0, oz0) = (load(&oa[0]), load(&oa[1]), load(&oa[2]));
-            let (dx, dy, dz) = (load(&da[0]), load(&da[1]), load(&da[2]));
+            let [ox0, oy0, oz0] = o;
+            let [dx, dy, dz] = d;
             // Per lane, as `Bvh::intersect`: no hit for tmax ≤ 0 or NaN, or a non-finite origin
             // or direction (0·x is 0 exactly for a finite x) …
             let finite = |v: __m512| _mm512_cmp_ps_mask::<_CMP_EQ_OQ>(_mm512_mul_ps(v, zero), zero);
-            let mut active = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(_mm512_loadu_ps(tmax.as_ptr()), zero)
+            let mut active = active
+                & _mm512_cmp_ps_mask::<_CMP_GT_OQ>(tmax, zero)
                 & finite(ox0)
                 & finite(oy0)
                 & finite(oz0)
@@ -191,7 +362,6 @@ impl Packets {
             let (dkx, dky, dkz) = pick(dx, dy, dz);
             let (ox, oy, oz) = pick(ox0, oy0, oz0);
             active &= _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(dkz, zero);
-            let active = active & ((1u32 << lanes.len()) - 1) as u16;
             let sz = _mm512_div_ps(_mm512_set1_ps(1.0), dkz);
             let (sx, sy) = (_mm512_mul_ps(dkx, sz), _mm512_mul_ps(dky, sz));
             let kzv =
@@ -207,7 +377,7 @@ impl Packets {
             let iy = [at(0, kyv), at(1, kyv), at(2, kyv)];
             let iz = [at(0, kzv), at(1, kzv), at(2, kzv)];
             let inf = _mm512_set1_ps(f32::INFINITY);
-            let mut best_t = _mm512_loadu_ps(tmax.as_ptr());
+            let mut best_t = tmax;
             // `best_t · RANGE_WIDEN`, for the range test before the division.
             let widen = _mm512_set1_ps(triangle::RANGE_WIDEN);
             let mut best_tw = _mm512_mul_ps(best_t, widen);
@@ -268,11 +438,7 @@ impl Packets {
             }
             // The barycentrics as the scalar test computes them: v and w times 1/det.
             let inv = _mm512_div_ps(_mm512_set1_ps(1.0), best_det);
-            _mm512_storeu_ps(res.t.as_mut_ptr(), best_t);
-            _mm512_storeu_ps(res.b1.as_mut_ptr(), _mm512_mul_ps(best_v, inv));
-            _mm512_storeu_ps(res.b2.as_mut_ptr(), _mm512_mul_ps(best_w, inv));
-            _mm512_storeu_si512(res.id.as_mut_ptr() as *mut _, best_id);
-            redo
+            KernelOut { t: best_t, b1: _mm512_mul_ps(best_v, inv), b2: _mm512_mul_ps(best_w, inv), id: best_id, redo }
         }
     }
 }
@@ -305,6 +471,41 @@ mod tests {
             }
         }
         hits
+    }
+
+    /// `intersect_batch` answers every live lane as the BVH does and no other, bit for bit,
+    /// whatever the live lanes (one packet, two, or lanes left to the BVH one by one).
+    #[test]
+    fn batch_query_equals_bvh_queries() {
+        let scene =
+            crate::scene::Scene::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box/scene.toml")).unwrap();
+        let accel = Accel::build(&scene.mesh);
+        let Some(p) = accel.packets() else {
+            assert!(!has_avx512(), "a CPU with AVX-512 F has a packet query for the Cornell box");
+            return;
+        };
+        let batch = RayBatch::random_in_bounds(&scene.mesh, 64 * BATCH, 5);
+        let mut rng = Pcg32::new(6, 0);
+        let (mut hits, mut counts) = (0, [0u32; 2]);
+        for k in 0..64 {
+            let rays: Vec<Ray> = (0..BATCH).map(|i| batch.ray(k * BATCH + i)).collect();
+            let axis = |f: fn(&Ray) -> Vec3, a: usize| -> [f32; BATCH] { std::array::from_fn(|i| f(&rays[i])[a]) };
+            let org = [0, 1, 2].map(|a| axis(|r| r.origin, a));
+            let dir = [0, 1, 2].map(|a| axis(|r| r.dir, a));
+            // From all lanes live down to a few.
+            let keep = 1.0 - k as f32 / 64.0;
+            let live = (0..BATCH).fold(0u32, |m, i| m | (((rng.next_f32() < keep) as u32) << i));
+            counts[(live.count_ones() <= 16) as usize] += 1;
+            let mut out = BatchHits::default();
+            p.intersect_batch(&accel.bvh, [&org[0], &org[1], &org[2]], [&dir[0], &dir[1], &dir[2]], live, f32::INFINITY, &mut out);
+            for (i, r) in rays.iter().enumerate() {
+                let want = if live & (1 << i) != 0 { accel.intersect(r, f32::INFINITY) } else { None };
+                let got = (out.prim[i] >= 0).then(|| (out.t[i].to_bits(), out.prim[i] as u32, out.b1[i].to_bits(), out.b2[i].to_bits()));
+                assert_eq!(got, want.map(|h| (h.t.to_bits(), h.prim, h.bary.x.to_bits(), h.bary.y.to_bits())), "batch {k}, lane {i}");
+                hits += got.is_some() as usize;
+            }
+        }
+        assert!(hits > 500 && counts[0] > 5 && counts[1] > 5, "{hits} hits, {counts:?} batches of two packets / one");
     }
 
     /// The packet query answers as the BVH does, bit for bit: on the Cornell box's camera rays

@@ -18,6 +18,8 @@
 //! own random stream, so the images are bit-identical to `trace`'s (no FMA contraction: Rust
 //! never fuses a multiply and an add unless told to).
 
+use crate::geometry::packet::{BatchHits, BATCH};
+use crate::geometry::Hit;
 use crate::light::connect_parts;
 use crate::material::{Bsdf, MaterialKind};
 use crate::math::{is_finite3, Frame, Ray, INV_PI};
@@ -25,8 +27,8 @@ use crate::rng::Pcg32;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 
-/// Paths per batch.
-pub const LANES: usize = 32;
+/// Paths per batch (the packet query's batch: `geometry::packet::BATCH`).
+pub const LANES: usize = BATCH;
 
 /// Fraction of the light distance kept for shadow rays (`path::SHADOW_EPS`).
 const SHADOW_EPS: f32 = 1e-4;
@@ -263,10 +265,18 @@ fn trace_batch_impl(scene: &Scene, rays: &[Ray], rngs: &mut [Pcg32], max_bounces
 #[inline(always)]
 fn stage_hit(scene: &Scene, w: &mut Wave, rngs: &mut [Pcg32], out: &mut [LaneResult; LANES], depth: u32, max_bounces: u32, n: usize) {
     // Where the mesh has a packet query, the live lanes' closest hits first, sixteen at a time.
-    let packed = scene.accel.packets().is_some();
-    let mut hits = [None; LANES];
-    if packed {
-        scene.accel.intersect_live(&w.ray[..n], &w.alive[..n], f32::INFINITY, &mut hits[..n]);
+    let packets = scene.accel.packets();
+    let mut hits = BatchHits::default();
+    if let Some(p) = packets {
+        let live = (0..n).fold(0u32, |m, i| m | ((w.alive[i] as u32) << i));
+        p.intersect_batch(
+            scene.accel.bvh(),
+            [&w.org.x, &w.org.y, &w.org.z],
+            [&w.dir.x, &w.dir.y, &w.dir.z],
+            live,
+            f32::INFINITY,
+            &mut hits,
+        );
     }
     for i in 0..n {
         w.has_light[i] = false;
@@ -277,7 +287,11 @@ fn stage_hit(scene: &Scene, w: &mut Wave, rngs: &mut [Pcg32], out: &mut [LaneRes
         let ray = w.ray[i];
         let (beta_d, beta_s) = (w.beta_d.get(i), w.beta_s.get(i));
         out[i].rays += 1;
-        let hit = if packed { hits[i] } else { scene.accel.intersect(&ray, f32::INFINITY) };
+        let hit = if packets.is_some() {
+            (hits.prim[i] >= 0).then(|| Hit { t: hits.t[i], prim: hits.prim[i] as u32, bary: Vec2::new(hits.b1[i], hits.b2[i]) })
+        } else {
+            scene.accel.intersect(&ray, f32::INFINITY)
+        };
         let Some(hit) = hit else {
             let le = scene.lights.env_radiance(ray.dir);
             if le.max_element() > 0.0 {
