@@ -40,9 +40,10 @@ pub const PACKET_MAX: usize = 48;
 /// Rays per packet.
 pub const WIDTH: usize = 16;
 
-/// Fewest rays `Accel::intersect_live` and `Packets::intersect_batch` send as a packet: a packet costs about the same for one
-/// ray as for sixteen, about what 10 BVH queries cost on the Cornell box. 8 and 12 measured
-/// level in the wavefront (`wave_ab 2n 2`: 1.149 and 1.147–1.156).
+/// Fewest rays `Accel::intersect_live` and `Packets::intersect_batch` send as a packet: a
+/// packet costs about the same for one ray as for sixteen, about what 10 BVH queries cost on
+/// the Cornell box. 8 and 12 measured level in the wavefront (`wave_ab 2n 2`: 1.149 and
+/// 1.147–1.156).
 pub const MIN_LANES: usize = 8;
 
 /// One triangle's vertices (x, y, z of each, then padding): one 64-byte load, from which each
