@@ -128,8 +128,9 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
         if batch.pixel.is_empty() {
             return;
         }
-        let lanes = wave::trace_samples(scene, &batch.start, opts.seed, opts.max_bounces, opts.russian_roulette);
-        for (&li, r) in batch.pixel.iter().zip(lanes.iter()) {
+        batch.result.resize(batch.start.len(), wave::LaneResult::default());
+        wave::trace_samples(scene, &batch.start, opts.seed, opts.max_bounces, opts.russian_roulette, &mut batch.result);
+        for (&li, r) in batch.pixel.iter().zip(batch.result.iter()) {
             let (mut radiance, mut diffuse) = (r.radiance, r.diffuse);
             t.rays += r.rays as u64;
             if !(radiance.is_finite() && diffuse.is_finite()) {
@@ -167,8 +168,9 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
                 rays: 0,
             };
             if use_wave {
-                // Batches of `wave::LANES` samples in the order of the loop below (pixel by
-                // pixel, sample by sample), so each pixel's statistics see the same sequence.
+                // Runs of up to `STREAM` samples in the order of the loop below (pixel by
+                // pixel, sample by sample), their results taken in that order, so each pixel's
+                // statistics see the same sequence.
                 let mut batch = Batch::default();
                 for ly in 0..th {
                     for lx in 0..tw {
@@ -177,7 +179,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
                         for s in 0..opts.spp {
                             batch.pixel.push(li);
                             batch.start.push(wave::SampleStart { px, py, sample: opts.first_sample + s });
-                            if batch.pixel.len() == wave::LANES {
+                            if batch.pixel.len() == STREAM {
                                 run_batch(&mut t, &mut batch);
                             }
                         }
@@ -271,11 +273,18 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64) + Syn
     Ok((frame, stats))
 }
 
-/// Samples waiting for `wave::trace_samples`: their pixel in the tile, and where they start.
+/// Samples handed to `wave::trace_samples` at once: enough that the stream's last rounds,
+/// with fewer paths left than lanes, are a small part of it (a row of a 16-pixel tile at 256
+/// spp), few enough that the buffers below stay small.
+const STREAM: usize = 4096;
+
+/// Samples waiting for `wave::trace_samples`: their pixel in the tile, where they start, and
+/// (once traced) their results.
 #[derive(Default)]
 struct Batch {
     pixel: Vec<usize>,
     start: Vec<wave::SampleStart>,
+    result: Vec<wave::LaneResult>,
 }
 
 /// A sample's own random stream and its camera ray (`wave::trace_samples` makes them with the

@@ -14,10 +14,16 @@
 //!    AVX2 + FMA or the SSE2 baseline, whichever the CPU has (chosen at run time);
 //! 3. per path (scalar): the shadow query, its contribution, Russian roulette.
 //!
+//! A render's samples stream through the lanes (`trace_samples`): a lane whose path has ended
+//! takes the next sample before the next round, so lanes at different bounces share a round
+//! and the batch stays full (a batch of 32 that ran until its last path ended was 60 % full
+//! on average on the Cornell box, whose open front lets paths escape).
+//!
 //! Every path performs exactly `path::trace`'s floating-point operations in its order, with its
 //! own random stream, so the images are bit-identical to `trace`'s (no FMA contraction: Rust
 //! never fuses a multiply and an add unless told to).
 
+use crate::camera::RayMaker;
 use crate::geometry::packet::{BatchHits, BATCH};
 use crate::geometry::Hit;
 use crate::light::connect_parts;
@@ -124,62 +130,146 @@ pub struct SampleStart {
     pub sample: u32,
 }
 
-/// `trace_batch` of the samples `starts` (at most `LANES`) of a render seeded with `seed`:
-/// their streams and camera rays are made here, every lane at once, exactly as
-/// `integrator::start_sample` makes them one by one (`Pcg32::for_sample`, then the film
-/// position's two draws and `Camera::ray`).
-pub fn trace_samples(scene: &Scene, starts: &[SampleStart], seed: u64, max_bounces: u32, rr: bool) -> [LaneResult; LANES] {
-    assert!(starts.len() <= LANES);
+/// Traces the samples `starts` of a render seeded with `seed` into `out` (one result a start,
+/// in the same order), `LANES` paths at a time: a lane whose path ends takes the next sample
+/// at once (path regeneration), so the batch stays full from the first bounce to the last
+/// instead of running on with fewer and fewer live paths. Each sample's stream and camera ray
+/// are made exactly as `integrator::start_sample` makes them one by one (`Pcg32::for_sample`,
+/// then the film position's two draws and `Camera::ray`), `LANES` at once; a path's result
+/// does not depend on the lane it runs in or on its neighbours, so every sample is traced
+/// bit for bit as `trace_batch` (and `path::trace`) would trace it.
+pub fn trace_samples(scene: &Scene, starts: &[SampleStart], seed: u64, max_bounces: u32, rr: bool, out: &mut [LaneResult]) {
+    assert_eq!(starts.len(), out.len());
     #[cfg(target_arch = "x86_64")]
     {
         use std::is_x86_feature_detected as has;
         if has!("avx512f") && has!("avx512vl") && has!("avx512dq") && has!("avx2") && has!("fma") {
             // SAFETY: the CPU has the features (checked just above).
-            return unsafe { trace_samples_avx512(scene, starts, seed, max_bounces, rr) };
+            return unsafe { trace_samples_avx512(scene, starts, seed, max_bounces, rr, out) };
         }
         if has!("avx2") && has!("fma") {
             // SAFETY: the CPU has AVX2 and FMA (checked just above).
-            return unsafe { trace_samples_avx2(scene, starts, seed, max_bounces, rr) };
+            return unsafe { trace_samples_avx2(scene, starts, seed, max_bounces, rr, out) };
         }
     }
-    trace_samples_impl(scene, starts, seed, max_bounces, rr)
+    trace_samples_impl(scene, starts, seed, max_bounces, rr, out)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma,avx512f,avx512vl,avx512dq")]
-unsafe fn trace_samples_avx512(scene: &Scene, starts: &[SampleStart], seed: u64, max_bounces: u32, rr: bool) -> [LaneResult; LANES] {
-    trace_samples_impl(scene, starts, seed, max_bounces, rr)
+unsafe fn trace_samples_avx512(scene: &Scene, starts: &[SampleStart], seed: u64, max_bounces: u32, rr: bool, out: &mut [LaneResult]) {
+    trace_samples_impl(scene, starts, seed, max_bounces, rr, out)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn trace_samples_avx2(scene: &Scene, starts: &[SampleStart], seed: u64, max_bounces: u32, rr: bool) -> [LaneResult; LANES] {
-    trace_samples_impl(scene, starts, seed, max_bounces, rr)
+unsafe fn trace_samples_avx2(scene: &Scene, starts: &[SampleStart], seed: u64, max_bounces: u32, rr: bool, out: &mut [LaneResult]) {
+    trace_samples_impl(scene, starts, seed, max_bounces, rr, out)
 }
 
 #[inline(always)]
-fn trace_samples_impl(scene: &Scene, starts: &[SampleStart], seed: u64, max_bounces: u32, rr: bool) -> [LaneResult; LANES] {
-    let n = starts.len();
-    let cam = &scene.camera;
-    let maker = cam.ray_maker();
-    let (mut px, mut py, mut sample) = ([0u32; LANES], [0u32; LANES], [0u32; LANES]);
-    for (i, st) in starts.iter().enumerate() {
-        (px[i], py[i], sample[i]) = (st.px, st.py, st.sample);
+fn trace_samples_impl(scene: &Scene, starts: &[SampleStart], seed: u64, max_bounces: u32, rr: bool, out: &mut [LaneResult]) {
+    let mut src = StartSource {
+        starts,
+        seed,
+        origin: scene.camera.position,
+        maker: scene.camera.ray_maker(),
+        width: scene.camera.width as u64,
+        made: 0,
+        taken: 0,
+        state: [0; LANES],
+        inc: [0; LANES],
+        dir: V3 { x: [0.0; LANES], y: [0.0; LANES], z: [0.0; LANES] },
+        out,
+    };
+    drive(scene, &mut src, max_bounces, rr);
+}
+
+/// Where a lane's next path comes from and where its result goes (`drive`).
+trait Source {
+    /// The next path: its number (for `finish`), camera ray and stream.
+    fn next(&mut self) -> Option<(usize, Ray, Pcg32)>;
+    /// Path `slot` has ended with `result`; `rng` is its stream after the path.
+    fn finish(&mut self, slot: usize, result: LaneResult, rng: Pcg32);
+}
+
+/// `trace_samples`'s paths: sample starts, made `LANES` at a time.
+struct StartSource<'a> {
+    starts: &'a [SampleStart],
+    seed: u64,
+    origin: Vec3,
+    maker: RayMaker,
+    width: u64,
+    /// Starts made so far (`made - LANES..made` are in the arrays below) and handed out.
+    made: usize,
+    taken: usize,
+    state: [u64; LANES],
+    inc: [u64; LANES],
+    dir: V3,
+    out: &'a mut [LaneResult],
+}
+
+impl StartSource<'_> {
+    /// Streams and camera rays of the next `LANES` starts, in one loop that vectorises: every
+    /// lane, the missing ones past the end too (as pixel 0), so that it has no branch.
+    #[inline(always)]
+    fn make(&mut self) {
+        let base = self.made;
+        for i in 0..LANES {
+            let st = self.starts.get(base + i).copied().unwrap_or_default();
+            let pixel = st.py as u64 * self.width + st.px as u64;
+            let mut rng = Pcg32::for_sample(self.seed, pixel, st.sample as u64);
+            let film = Vec2::new(st.px as f32, st.py as f32) + rng.next_2d();
+            (self.state[i], self.inc[i]) = rng.parts();
+            self.dir.set(i, self.maker.ray(film).dir);
+        }
+        self.made += LANES;
     }
-    // Every lane, the unused ones too, so that the loop has no branch and vectorises (a
-    // sample start costs about as much as a bounce's scalar stage did one by one).
-    let (mut state, mut inc) = ([0u64; LANES], [0u64; LANES]);
-    let mut dir = V3 { x: [0.0; LANES], y: [0.0; LANES], z: [0.0; LANES] };
-    for i in 0..LANES {
-        let pixel = py[i] as u64 * cam.width as u64 + px[i] as u64;
-        let mut rng = Pcg32::for_sample(seed, pixel, sample[i] as u64);
-        let film = Vec2::new(px[i] as f32, py[i] as f32) + rng.next_2d();
-        (state[i], inc[i]) = rng.parts();
-        dir.set(i, maker.ray(film).dir);
+}
+
+impl Source for StartSource<'_> {
+    #[inline(always)]
+    fn next(&mut self) -> Option<(usize, Ray, Pcg32)> {
+        if self.taken == self.starts.len() {
+            return None;
+        }
+        if self.taken == self.made {
+            self.make();
+        }
+        let k = self.taken % LANES;
+        let slot = self.taken;
+        self.taken += 1;
+        Some((slot, Ray::new(self.origin, self.dir.get(k)), Pcg32::from_parts(self.state[k], self.inc[k])))
     }
-    let rays: [Ray; LANES] = std::array::from_fn(|i| Ray::new(cam.position, dir.get(i)));
-    let mut rngs: [Pcg32; LANES] = std::array::from_fn(|i| Pcg32::from_parts(state[i], inc[i]));
-    trace_batch_impl(scene, &rays[..n], &mut rngs[..n], max_bounces, rr)
+
+    #[inline(always)]
+    fn finish(&mut self, slot: usize, result: LaneResult, _rng: Pcg32) {
+        self.out[slot] = result;
+    }
+}
+
+/// `trace_batch`'s paths: given rays and streams, the streams handed back at the end.
+struct BatchSource<'a> {
+    rays: &'a [Ray],
+    rngs: &'a mut [Pcg32],
+    taken: usize,
+    out: [LaneResult; LANES],
+}
+
+impl Source for BatchSource<'_> {
+    #[inline(always)]
+    fn next(&mut self) -> Option<(usize, Ray, Pcg32)> {
+        let slot = self.taken;
+        let ray = *self.rays.get(slot)?;
+        self.taken += 1;
+        Some((slot, ray, self.rngs[slot].clone()))
+    }
+
+    #[inline(always)]
+    fn finish(&mut self, slot: usize, result: LaneResult, rng: Pcg32) {
+        self.out[slot] = result;
+        self.rngs[slot] = rng;
+    }
 }
 
 /// Traces `rays.len()` (at most `LANES`) camera rays with their random streams, as
@@ -232,43 +322,91 @@ unsafe fn trace_batch_avx2(scene: &Scene, rays: &[Ray], rngs: &mut [Pcg32], max_
 
 #[inline(always)]
 fn trace_batch_impl(scene: &Scene, rays: &[Ray], rngs: &mut [Pcg32], max_bounces: u32, rr: bool) -> [LaneResult; LANES] {
-    let n = rays.len();
+    let mut src = BatchSource { rays, rngs, taken: 0, out: [LaneResult::default(); LANES] };
+    drive(scene, &mut src, max_bounces, rr);
+    src.out
+}
+
+/// Per-lane bookkeeping of `drive`: which path a lane runs (`FREE`: none), at which bounce,
+/// with which stream, and how many rays it has traced.
+struct Lanes {
+    slot: [usize; LANES],
+    depth: [u32; LANES],
+    rays: [u32; LANES],
+    rngs: [Pcg32; LANES],
+}
+
+const FREE: usize = usize::MAX;
+
+/// Runs every path of `src` through the stages, one bounce of every lane per round, until the
+/// source is empty and every lane's path has ended; a lane whose path ends is refilled from
+/// `src` before the next round.
+#[inline(always)]
+fn drive<S: Source>(scene: &Scene, src: &mut S, max_bounces: u32, rr: bool) {
     // SAFETY: every field is a plain array of f32, bool, Vec2 or Ray, for which all-zero is valid.
     let mut w: Wave = unsafe { std::mem::zeroed() };
-    let mut out = [LaneResult::default(); LANES];
-    for (i, r) in rays.iter().enumerate() {
-        w.alive[i] = true;
-        w.prev_delta[i] = true;
-        w.org.set(i, r.origin);
-        w.dir.set(i, r.dir);
-        w.ray[i] = *r;
-        w.prev_p.set(i, r.origin);
-        w.beta_s.set(i, Vec3::ONE);
-    }
-    for depth in 0..=max_bounces {
+    let mut lanes =
+        Lanes { slot: [FREE; LANES], depth: [0; LANES], rays: [0; LANES], rngs: std::array::from_fn(|_| Pcg32::from_parts(0, 1)) };
+    let mut exhausted = false;
+    loop {
+        if !exhausted {
+            for i in 0..LANES {
+                if lanes.slot[i] != FREE {
+                    continue;
+                }
+                let Some((slot, r, rng)) = src.next() else {
+                    exhausted = true;
+                    break;
+                };
+                // A path's start state, as a fresh batch has it.
+                lanes.slot[i] = slot;
+                lanes.depth[i] = 0;
+                lanes.rays[i] = 0;
+                lanes.rngs[i] = rng;
+                w.alive[i] = true;
+                w.split_started[i] = false;
+                w.prev_delta[i] = true;
+                w.prev_pdf[i] = 0.0;
+                w.org.set(i, r.origin);
+                w.dir.set(i, r.dir);
+                w.ray[i] = r;
+                w.prev_p.set(i, r.origin);
+                w.beta_d.set(i, Vec3::ZERO);
+                w.beta_s.set(i, Vec3::ONE);
+                w.l_d.set(i, Vec3::ZERO);
+                w.l_s.set(i, Vec3::ZERO);
+            }
+        }
         if !w.alive.iter().any(|&a| a) {
             break;
         }
-        stage_hit(scene, &mut w, rngs, &mut out, depth, max_bounces, n);
+        stage_hit(scene, &mut w, &mut lanes, max_bounces);
         stage_shade(&mut w);
-        stage_shadow(scene, &mut w, rngs, &mut out, depth, rr, n);
+        stage_shadow(scene, &mut w, &mut lanes, rr);
+        for i in 0..LANES {
+            if lanes.slot[i] == FREE {
+                continue;
+            }
+            if w.alive[i] {
+                lanes.depth[i] += 1;
+                continue;
+            }
+            let (l_d, l_s) = (w.l_d.get(i), w.l_s.get(i));
+            let result = LaneResult { radiance: l_d + l_s, diffuse: l_d, rays: lanes.rays[i] };
+            src.finish(lanes.slot[i], result, lanes.rngs[i].clone());
+            lanes.slot[i] = FREE;
+        }
     }
-    for (i, o) in out.iter_mut().enumerate().take(n) {
-        let (l_d, l_s) = (w.l_d.get(i), w.l_s.get(i));
-        o.radiance = l_d + l_s;
-        o.diffuse = l_d;
-    }
-    out
 }
 
 /// Stage 1, path by path: `path::trace` from the closest-hit query to the light selection.
 #[inline(always)]
-fn stage_hit(scene: &Scene, w: &mut Wave, rngs: &mut [Pcg32], out: &mut [LaneResult; LANES], depth: u32, max_bounces: u32, n: usize) {
+fn stage_hit(scene: &Scene, w: &mut Wave, lanes: &mut Lanes, max_bounces: u32) {
     // Where the mesh has a packet query, the live lanes' closest hits first, sixteen at a time.
     let packets = scene.accel.packets();
     let mut hits = BatchHits::default();
     if let Some(p) = packets {
-        let live = (0..n).fold(0u32, |m, i| m | ((w.alive[i] as u32) << i));
+        let live = (0..LANES).fold(0u32, |m, i| m | ((w.alive[i] as u32) << i));
         p.intersect_batch(
             scene.accel.bvh(),
             [&w.org.x, &w.org.y, &w.org.z],
@@ -278,15 +416,16 @@ fn stage_hit(scene: &Scene, w: &mut Wave, rngs: &mut [Pcg32], out: &mut [LaneRes
             &mut hits,
         );
     }
-    for i in 0..n {
+    for i in 0..LANES {
         w.has_light[i] = false;
         if !w.alive[i] {
             continue;
         }
-        let rng = &mut rngs[i];
+        let depth = lanes.depth[i];
+        let rng = &mut lanes.rngs[i];
         let ray = w.ray[i];
         let (beta_d, beta_s) = (w.beta_d.get(i), w.beta_s.get(i));
-        out[i].rays += 1;
+        lanes.rays[i] += 1;
         let hit = if packets.is_some() {
             (hits.prim[i] >= 0).then(|| Hit { t: hits.t[i], prim: hits.prim[i] as u32, bary: Vec2::new(hits.b1[i], hits.b2[i]) })
         } else {
@@ -459,17 +598,15 @@ fn stage_shade(w: &mut Wave) {
 
 /// Stage 3, path by path: shadow rays, their contributions, Russian roulette.
 #[inline(always)]
-fn stage_shadow(scene: &Scene, w: &mut Wave, rngs: &mut [Pcg32], out: &mut [LaneResult; LANES], depth: u32, rr: bool, n: usize) {
-    if n > 0 {
-        w.sh_ray[0] = Ray::new(w.sh_org.get(0), w.sh_dir.get(0));
-    }
-    for i in 0..n {
+fn stage_shadow(scene: &Scene, w: &mut Wave, lanes: &mut Lanes, rr: bool) {
+    w.sh_ray[0] = Ray::new(w.sh_org.get(0), w.sh_dir.get(0));
+    for i in 0..LANES {
         // The next lane's shadow ray, one query ahead (see `Wave::ray`).
-        if i + 1 < n {
+        if i + 1 < LANES {
             w.sh_ray[i + 1] = Ray::new(w.sh_org.get(i + 1), w.sh_dir.get(i + 1));
         }
         if w.shadow[i] {
-            out[i].rays += 1;
+            lanes.rays[i] += 1;
             if !scene.accel.occluded(&w.sh_ray[i], w.sh_tmax[i]) {
                 w.l_d.set(i, w.l_d.get(i) + w.add_d.get(i));
                 w.l_s.set(i, w.l_s.get(i) + w.add_s.get(i));
@@ -483,10 +620,10 @@ fn stage_shadow(scene: &Scene, w: &mut Wave, rngs: &mut [Pcg32], out: &mut [Lane
             w.alive[i] = false;
             continue;
         }
-        if rr && depth >= 3 {
+        if rr && lanes.depth[i] >= 3 {
             let (bd, bs) = (w.beta_d.get(i), w.beta_s.get(i));
             let q = (1.0 - (bd + bs).max_element()).clamp(0.05, 0.95);
-            if rngs[i].next_f32() < q {
+            if lanes.rngs[i].next_f32() < q {
                 w.alive[i] = false;
                 continue;
             }
@@ -608,28 +745,36 @@ mod tests {
         }
     }
 
-    /// Samples started in the batch (`trace_samples`) trace what the same samples started one
-    /// by one (`Pcg32::for_sample`, `Camera::ray`) trace, bit for bit, for every batch length.
+    /// Samples streamed through the lanes (`trace_samples`: started in the batch, a lane
+    /// refilled as soon as its path ends) trace what the same samples started one by one
+    /// (`Pcg32::for_sample`, `Camera::ray`) trace through `path::trace`, bit for bit, for
+    /// streams shorter than, as long as and longer than a batch, with and without Russian
+    /// roulette (which ends paths at different bounces, so lanes are refilled mid-stream).
     #[test]
-    fn samples_started_in_the_batch_equal_samples_started_alone() {
-        let s = load("scenes/cornell-box/scene.toml");
-        let cam = &s.camera;
-        for len in 1..=LANES {
-            let starts: Vec<SampleStart> = (0..len as u32)
-                .map(|j| SampleStart { px: (j * 37 + len as u32) % cam.width, py: (j * 11) % cam.height, sample: j % 3 + 1000 })
-                .collect();
-            let mut rays = Vec::new();
-            let mut rngs = Vec::new();
-            for st in &starts {
-                let mut rng = Pcg32::for_sample(9, st.py as u64 * cam.width as u64 + st.px as u64, st.sample as u64);
-                rays.push(cam.ray(Vec2::new(st.px as f32, st.py as f32) + rng.next_2d()));
-                rngs.push(rng);
-            }
-            let a = trace_samples(&s, &starts, 9, 5, true);
-            let b = trace_batch(&s, &rays, &mut rngs, 5, true);
-            for (x, y) in a[..len].iter().zip(&b[..len]) {
-                assert_eq!(x.radiance.to_array().map(f32::to_bits), y.radiance.to_array().map(f32::to_bits));
-                assert_eq!(x.rays, y.rays);
+    fn streamed_samples_equal_samples_traced_alone() {
+        for scene in ["scenes/cornell-box/scene.toml", "scenes/cornell-bunny/scene.toml"] {
+            let s = load(scene);
+            let cam = &s.camera;
+            for rr in [false, true] {
+                for len in [1, 2, 7, LANES - 1, LANES, LANES + 1, 3 * LANES + 5, 257] {
+                    let starts: Vec<SampleStart> = (0..len as u32)
+                        .map(|j| SampleStart { px: (j * 37 + len as u32) % cam.width, py: (j * 11) % cam.height, sample: j % 3 + 1000 })
+                        .collect();
+                    let mut got = vec![LaneResult::default(); len];
+                    trace_samples(&s, &starts, 9, 5, rr, &mut got);
+                    for (st, g) in starts.iter().zip(&got) {
+                        let mut rng = Pcg32::for_sample(9, st.py as u64 * cam.width as u64 + st.px as u64, st.sample as u64);
+                        let ray = cam.ray(Vec2::new(st.px as f32, st.py as f32) + rng.next_2d());
+                        let r = path::trace(&s, ray, &mut rng, 5, rr, BufferRequest::RADIANCE_ONLY);
+                        assert_eq!(
+                            g.radiance.to_array().map(f32::to_bits),
+                            r.radiance.to_array().map(f32::to_bits),
+                            "{scene} len {len} rr {rr}"
+                        );
+                        assert_eq!(g.diffuse.to_array().map(f32::to_bits), r.diffuse.to_array().map(f32::to_bits));
+                        assert_eq!(g.rays, r.rays);
+                    }
+                }
             }
         }
     }
