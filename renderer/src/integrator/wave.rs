@@ -16,8 +16,9 @@
 //!
 //! A render's samples stream through the lanes (`trace_samples`): a lane whose path has ended
 //! takes the next sample before the next round, so lanes at different bounces share a round
-//! and the batch stays full (a batch of 32 that ran until its last path ended was 60 % full
-//! on average on the Cornell box, whose open front lets paths escape).
+//! and the batch stays full (a batch that ran until its last path ended ran its later bounces
+//! with fewer and fewer live paths: on the Cornell box, whose open front lets paths escape,
+//! most batches end with a handful).
 //!
 //! Every path performs exactly `path::trace`'s floating-point operations in its order, with its
 //! own random stream, so the images are bit-identical to `trace`'s (no FMA contraction: Rust
