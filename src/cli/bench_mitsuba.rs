@@ -232,7 +232,7 @@ pub fn integrator_vs_mitsuba(scene_path: &Path, s: &Settings, mitsuba: bool) -> 
     scene.camera.height = s.height;
     let paths = s.width as f64 * s.height as f64 * s.spp as f64;
     println!(
-        "\nintegrator: {} at {}x{}, {} spp, {} bounces (Mitsuba max_depth {}), no Russian roulette, box filter, independent sampler; {} threads; best of {}, ours and Mitsuba alternating",
+        "\nintegrator: {} at {}x{}, {} spp, {} bounces (Mitsuba max_depth {}), no Russian roulette, box filter, independent sampler; {} threads; best of {}, ours and Mitsuba alternating (who goes first alternates too)",
         scene_path.display(),
         s.width,
         s.height,
@@ -268,6 +268,9 @@ pub fn integrator_vs_mitsuba(scene_path: &Path, s: &Settings, mitsuba: bool) -> 
     let mut ours_mean = [0.0f64; 3];
     let mut theirs_best: Option<MitsubaRun> = None;
     let mut compiled = 0u64;
+    // ours/Mitsuba speed of each run's pair: the two renders of a pair run back to back, so a
+    // change in the host's speed between runs (±15 % here) moves both alike.
+    let mut pair_ratios: Vec<f64> = Vec::new();
     for run in 0..s.repeat.max(1) {
         let opts = RenderOptions {
             spp: s.spp,
@@ -278,34 +281,45 @@ pub fn integrator_vs_mitsuba(scene_path: &Path, s: &Settings, mitsuba: bool) -> 
             crop: None,
             first_sample: 0,
         };
-        let cpu0 = process_cpu_seconds();
-        let (frame, st) = integrator::render(&scene, &opts, &|_| {})?;
-        if let (Some(a), Some(b)) = (cpu0, process_cpu_seconds()) {
-            ours_cpu = ours_cpu.min(b - a);
-        }
-        let secs = st.wall.as_secs_f64();
-        if ours_best.is_none_or(|(b, _)| secs < b) {
-            ours_best = Some((secs, st.rays));
-            let n = (frame.width * frame.height) as f64;
-            ours_mean = [0, 1, 2].map(|c| frame.radiance.mean.iter().skip(c).step_by(3).map(|&v| v as f64).sum::<f64>() / n);
-        }
-        if let Some(m) = side.as_mut() {
-            match m.session.render(run + 1) {
-                Ok(r) => {
-                    compiled += r.compiled_kernels;
-                    if r.cpu_seconds.is_finite() {
-                        theirs_cpu = theirs_cpu.min(r.cpu_seconds);
-                    }
-                    if theirs_best.as_ref().is_none_or(|b| r.seconds < b.seconds) {
-                        theirs_best = Some(r);
-                    }
+        // Which renders first alternates from run to run, so neither side always follows the
+        // other's heat and cache state.
+        let (mut ours_secs, mut theirs_secs) = (None, None);
+        for ours_turn in if run % 2 == 0 { [true, false] } else { [false, true] } {
+            if ours_turn {
+                let cpu0 = process_cpu_seconds();
+                let (frame, st) = integrator::render(&scene, &opts, &|_| {})?;
+                if let (Some(a), Some(b)) = (cpu0, process_cpu_seconds()) {
+                    ours_cpu = ours_cpu.min(b - a);
                 }
-                Err(e) => {
-                    eprintln!("warning: Mitsuba comparison stopped: {e:#}");
-                    side = None;
-                    theirs_best = None;
+                let secs = st.wall.as_secs_f64();
+                ours_secs = Some(secs);
+                if ours_best.is_none_or(|(b, _)| secs < b) {
+                    ours_best = Some((secs, st.rays));
+                    let n = (frame.width * frame.height) as f64;
+                    ours_mean = [0, 1, 2].map(|c| frame.radiance.mean.iter().skip(c).step_by(3).map(|&v| v as f64).sum::<f64>() / n);
+                }
+            } else if let Some(m) = side.as_mut() {
+                match m.session.render(run + 1) {
+                    Ok(r) => {
+                        compiled += r.compiled_kernels;
+                        if r.cpu_seconds.is_finite() {
+                            theirs_cpu = theirs_cpu.min(r.cpu_seconds);
+                        }
+                        theirs_secs = Some(r.seconds);
+                        if theirs_best.as_ref().is_none_or(|b| r.seconds < b.seconds) {
+                            theirs_best = Some(r);
+                        }
+                    }
+                    Err(e) => {
+                        eprintln!("warning: Mitsuba comparison stopped: {e:#}");
+                        side = None;
+                        theirs_best = None;
+                    }
                 }
             }
+        }
+        if let (Some(o), Some(t)) = (ours_secs, theirs_secs) {
+            pair_ratios.push(t / o);
         }
     }
     let (secs, rays) = ours_best.ok_or_else(|| anyhow!("no run"))?;
@@ -319,7 +333,15 @@ pub fn integrator_vs_mitsuba(scene_path: &Path, s: &Settings, mitsuba: bool) -> 
             String::new()
         };
         println!("  Mitsuba  {:>7.3} M paths/s ({:.2} s per render{jit})", theirs * 1e-6, t.seconds);
-        println!("  ours/Mitsuba {:.2}x ({}, wall clock)", ours / theirs, m.session.ready.variant);
+        println!("  ours/Mitsuba {:.2}x ({}, wall clock, best against best)", ours / theirs, m.session.ready.variant);
+        if !pair_ratios.is_empty() {
+            let list: Vec<String> = pair_ratios.iter().map(|r| format!("{r:.2}")).collect();
+            let mut sorted = pair_ratios.clone();
+            sorted.sort_by(f64::total_cmp);
+            let n = sorted.len();
+            let median = if n % 2 == 1 { sorted[n / 2] } else { 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]) };
+            println!("  ours/Mitsuba run by run (the two renders of a run back to back): {} ; median {median:.2}x", list.join(" "));
+        }
         if ours_cpu.is_finite() && theirs_cpu.is_finite() && ours_cpu > 0.0 && theirs_cpu > 0.0 {
             println!(
                 "  per CPU second (all threads of each process, best run): ours {:.3} M paths, Mitsuba {:.3} M paths; ours/Mitsuba {:.2}x",
