@@ -13,7 +13,10 @@
 //! of `target/embree-venv`, fast mode; `er` its robust mode, `e2` kept to its AVX2 kernels), traced in the same kind of loop;
 //! `e16` and `er16` trace 16-ray packets (`rtcIntersect16`, as Mitsuba's `llvm_ad_rgb` does on
 //! an AVX-512 CPU), after checking that they answer as `rtcIntersect1` does.
-//! `MESH=cornell` or `MESH=sphere` runs one of the two meshes.
+//! `MESH=cornell` or `MESH=sphere` runs one of the two meshes; `SPHERE_N=80` makes the sphere
+//! 80×80×2 triangles instead of 230×230×2 (to see the ratio with the mesh in cache), and
+//! `MISS=1` replaces the camera rays by rays that start far outside the mesh's box and point
+//! away from it (the per-ray setup and the root node's test alone).
 
 use renderer::bench::{displaced_sphere, thread_cpu_seconds, trace, trace_one_at_a_time, RayBatch, SphereStyle};
 use renderer::embree::{library_in_venv, Embree, EmbreeScene};
@@ -37,11 +40,28 @@ fn main() {
     };
     let (embree, embree_avx2) = (lib(None), lib(Some("isa=avx2")));
     let only = std::env::var("MESH").unwrap_or_default();
-    for (name, mesh) in [("cornell", scene.mesh.clone()), ("sphere", displaced_sphere(230, 230, SphereStyle::Bench))] {
+    for (name, mesh) in [
+        ("cornell", scene.mesh.clone()),
+        ("sphere", {
+            let n: u32 = std::env::var("SPHERE_N").ok().and_then(|s| s.parse().ok()).unwrap_or(230);
+            displaced_sphere(n, n, SphereStyle::Bench)
+        }),
+    ] {
         if !only.is_empty() && only != name {
             continue;
         }
-        let cam = RayBatch::camera(&mesh, 500_000, 1);
+        let mut cam = RayBatch::camera(&mesh, 500_000, 1);
+        if std::env::var("MISS").is_ok() {
+            // Rays from far outside the mesh's box pointing away: setup and the root test only.
+            let (lo, hi) = mesh.bounds();
+            let (c, r) = ((lo + hi) * 0.5, (hi - lo).length());
+            let mut b = RayBatch::default();
+            for i in 0..cam.len() {
+                let d = cam.dirs[i];
+                b.push(c + d * (10.0 * r), d, f32::INFINITY);
+            }
+            cam = b;
+        }
         let rnd = RayBatch::random_in_bounds(&mesh, 500_000, 2);
         let accels: Vec<Option<Accel>> = variants
             .iter()
