@@ -488,7 +488,7 @@ fn seconds_on_this_thread<R>(f: impl FnOnce() -> R) -> (f64, R) {
 }
 
 /// Median (mean of the two middle values for an even count); `None` for no values.
-fn median(v: &[f64]) -> Option<f64> {
+pub fn median(v: &[f64]) -> Option<f64> {
     let mut v = v.to_vec();
     v.sort_by(f64::total_cmp);
     let n = v.len();

@@ -334,12 +334,8 @@ pub fn integrator_vs_mitsuba(scene_path: &Path, s: &Settings, mitsuba: bool) -> 
         };
         println!("  Mitsuba  {:>7.3} M paths/s ({:.2} s per render{jit})", theirs * 1e-6, t.seconds);
         println!("  ours/Mitsuba {:.2}x ({}, wall clock, best against best)", ours / theirs, m.session.ready.variant);
-        if !pair_ratios.is_empty() {
+        if let Some(median) = renderer::bench::median(&pair_ratios) {
             let list: Vec<String> = pair_ratios.iter().map(|r| format!("{r:.2}")).collect();
-            let mut sorted = pair_ratios.clone();
-            sorted.sort_by(f64::total_cmp);
-            let n = sorted.len();
-            let median = if n % 2 == 1 { sorted[n / 2] } else { 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]) };
             println!("  ours/Mitsuba run by run (the two renders of a run back to back): {} ; median {median:.2}x", list.join(" "));
         }
         if ours_cpu.is_finite() && theirs_cpu.is_finite() && ours_cpu > 0.0 && theirs_cpu > 0.0 {
