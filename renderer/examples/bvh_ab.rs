@@ -3,7 +3,7 @@
 //! ray. Each variant is a node cost for the wide collapse (`Accel::build_tuned`), optionally
 //! followed by `:sse2` to force the SSE2 node test, `:avx2` for the AVX2 query without AVX-512's
 //! registers where the CPU has them, `:tri4` for the AVX2 node test with leaves
-//! tested one `Tri4` block at a time (`:` for the default) and by an obvhs build
+//! tested one `Tri4` block at a time, `:tri8` two blocks at a time (the default; `:` also gives it) and by an obvhs build
 //! preset (`:very_fast`, `:fast`, `:medium`, `:slow`; by default `bvh::build_params`'s, which
 //! depends on the mesh's size), e.g.
 //! `REPS=7 cargo run --release -p renderer --example bvh_ab -- 3:sse2 3 4 3::slow`. Rays are
@@ -83,7 +83,11 @@ fn main() {
                 };
                 let mut a = Accel::build_tuned(&mesh, params, c.parse().expect("variant: a node cost"));
                 a.set_avx2(isa != "sse2");
-                a.set_tri8(isa != "tri4");
+                match isa {
+                    "tri4" => drop(a.set_tri8(false)),
+                    "tri8" => drop(a.set_tri8(true)),
+                    _ => (),
+                }
                 if isa == "avx2" {
                     a.set_avx512(false);
                 }
