@@ -121,8 +121,7 @@ pub struct Bvh {
     stack_need: usize,
     /// Whether traversal prefetches the subtrees it stacks: only for a BVH larger than
     /// `PREFETCH_MIN_BYTES`, which waits on memory; a small one stays in L1/L2, where the
-    /// prefetch loop (2 or 4 lines, by child kind) is only instructions and a branch that
-    /// alternates with the kind of child.
+    /// four prefetches per stacked child are only instructions.
     prefetch_stacked: bool,
     /// Set where the CPU has AVX2 and FMA: traversal then tests the eight children of a node
     /// in one 8-wide AVX operation (`avx2::node_test`) instead of two SSE2 ones.
@@ -563,7 +562,8 @@ impl Bvh {
             const _: () = assert!(std::mem::size_of::<Node>() == 4 * 64);
             // Four lines for either kind: a whole node, or a leaf's first block and a half.
             // A count by kind (4 or 2) made a loop whose exit mispredicted as the kinds
-            // alternate; fixed, the displaced sphere traced 3–4 % faster (docs/performance.md).
+            // alternate; fixed, the displaced sphere traced 3–5 % faster (docs/performance.md, "A Zen 1
+            // machine").
             for l in 0..4 {
                 // SAFETY: prefetching is a hint and never faults, even for an address outside
                 // the allocation (wrapping_add keeps the pointer arithmetic defined).
