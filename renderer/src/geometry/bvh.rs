@@ -559,12 +559,11 @@ impl Bvh {
             } else {
                 self.blocks.as_ptr().wrapping_add((c & ((1 << BLOCK_BITS) - 1)) as usize) as *const i8
             };
-            const _: () = assert!(std::mem::size_of::<Node>() == 4 * 64);
-            // Four lines for either kind: a whole node, or a leaf's first block and a half.
-            // A count by kind (4 or 2) made a loop whose exit mispredicted as the kinds
-            // alternate; fixed, the displaced sphere traced 3–5 % faster (docs/performance.md, "A Zen 1
-            // machine").
-            for l in 0..4 {
+            // A node's lines for either kind (a leaf: its first block and a half). A count by
+            // kind (4 or 2) made a loop whose exit mispredicted as the kinds alternate; fixed,
+            // the displaced sphere traced 3–5 % faster (docs/performance.md, "A Zen 1 machine").
+            const LINES: usize = std::mem::size_of::<Node>() / 64;
+            for l in 0..LINES {
                 // SAFETY: prefetching is a hint and never faults, even for an address outside
                 // the allocation (wrapping_add keeps the pointer arithmetic defined).
                 unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * l)) };
