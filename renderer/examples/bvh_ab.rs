@@ -4,13 +4,15 @@
 //! followed by `:sse2` to force the SSE2 node test, `:avx2` for the AVX2 query without AVX-512's
 //! registers where the CPU has them, `:tri4` for the AVX2 node test with leaves
 //! tested one `Tri4` block at a time, `:tri8` two blocks at a time (the default; `:` also
-//! gives it) and by an obvhs build preset (`:very_fast`, `:fast`, `:medium`, `:slow`; by
+//! gives it), `:4k` for the BVH's arrays on ordinary pages instead of huge ones (`bvh::Pages`),
+//! and by an obvhs build preset (`:very_fast`, `:fast`, `:medium`, `:slow`; by
 //! default `bvh::build_params`'s, which depends on the mesh's size), e.g.
 //! `REPS=7 cargo run --release -p renderer --example bvh_ab -- 3:sse2 3 4 3::slow`. Rays are
 //! traced one `intersect` after another in a loop (`bench::trace_one_at_a_time`), or, for a
 //! variant prefixed with `r` (`r5`), through `bench::trace`'s parallel iterator on the
 //! one-thread pool. The variant `e` is Embree in this process (`renderer::embree`, the library
-//! of `target/embree-venv`, fast mode; `er` its robust mode, `e2` kept to its AVX2 kernels), traced in the same kind of loop;
+//! of `target/embree-venv`, fast mode; `er` its robust mode, `e2` kept to its AVX2 kernels, `eh` with
+//! its `hugepages=1` option), traced in the same kind of loop;
 //! `e16` and `er16` trace 16-ray packets (`rtcIntersect16`, as Mitsuba's `llvm_ad_rgb` does on
 //! an AVX-512 CPU), after checking that they answer as `rtcIntersect1` does.
 //! `MESH=cornell` or `MESH=sphere` runs one of the two meshes; `SPHERE_N=80` makes the sphere
@@ -31,14 +33,14 @@ fn main() {
     let ws = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf();
     let scene = Scene::load(&ws.join("scenes/cornell-box/scene.toml")).expect("scene");
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
-    let is_embree = |v: &str| v == "e" || v == "er" || v == "e2" || v == "e16" || v == "er16";
+    let is_embree = |v: &str| v == "e" || v == "er" || v == "e2" || v == "eh" || v == "e16" || v == "er16";
     let lib = |config: Option<&str>| {
         variants.iter().any(|v| is_embree(v)).then(|| {
             let path = library_in_venv(&ws.join("target/embree-venv")).unwrap_or_else(|e| panic!("{e}"));
             Embree::load_with_config(&path, config).unwrap_or_else(|e| panic!("{e}"))
         })
     };
-    let (embree, embree_avx2) = (lib(None), lib(Some("isa=avx2")));
+    let (embree, embree_avx2, embree_huge) = (lib(None), lib(Some("isa=avx2")), lib(Some("hugepages=1")));
     let only = std::env::var("MESH").unwrap_or_default();
     for (name, mesh) in [
         ("cornell", scene.mesh.clone()),
@@ -86,6 +88,7 @@ fn main() {
                 match isa {
                     "tri4" => drop(a.set_tri8(false)),
                     "tri8" => drop(a.set_tri8(true)),
+                    "4k" => a.set_huge_pages(false),
                     _ => (),
                 }
                 if isa == "avx2" {
@@ -97,7 +100,11 @@ fn main() {
         let scenes: Vec<Option<EmbreeScene>> = variants
             .iter()
             .map(|v| {
-                let dev = if v == "e2" { &embree_avx2 } else { &embree };
+                let dev = match v.as_str() {
+                    "e2" => &embree_avx2,
+                    "eh" => &embree_huge,
+                    _ => &embree,
+                };
                 is_embree(v).then(|| dev.as_ref().unwrap().scene(&mesh, v.starts_with("er")).unwrap_or_else(|e| panic!("{e}")))
             })
             .collect();

@@ -295,6 +295,8 @@ pub struct RaySetReport {
     /// 2026-11-29, docs/performance.md), a steadier figure than the ratio of the two bests,
     /// which may come from different moments.
     pub pair_ratio_median: Option<f64>,
+    /// Lowest and highest of those ratios: how far the machine moved them.
+    pub pair_ratio_range: Option<(f64, f64)>,
     /// Embree called in this process (`EmbreeSetup::library`), in its fast mode and in its
     /// robust (watertight, as our BVH is) mode; empty without the library.
     pub in_process: Vec<InProcessFigures>,
@@ -308,6 +310,8 @@ pub struct InProcessFigures {
     pub best_1t: f64,
     /// Median over the repetitions of ours (1t) / it (1t), measured back to back.
     pub pair_ratio_median: f64,
+    /// Lowest and highest of those ratios.
+    pub pair_ratio_range: (f64, f64),
     /// Fraction of rays on which it and we disagree about hit or miss: a check of the binding
     /// (the fast mode is not watertight, so a few rays through edges may differ).
     pub hit_disagreement: f64,
@@ -435,6 +439,7 @@ pub fn ray_bench(
             ours_1t,
             embree_1t,
             pair_ratio_median: median(&pair_ratios),
+            pair_ratio_range: range(&pair_ratios),
             in_process: lib.iter().filter_map(InProcessRuns::figures).collect(),
         });
     }
@@ -468,6 +473,7 @@ impl InProcessRuns {
             robust: self.robust,
             best_1t: self.best,
             pair_ratio_median: median(&self.ratios)?,
+            pair_ratio_range: range(&self.ratios)?,
             hit_disagreement: self.disagreement,
             build_seconds: self.build,
         })
@@ -485,6 +491,13 @@ fn seconds_on_this_thread<R>(f: impl FnOnce() -> R) -> (f64, R) {
         (Some(a), Some(b)) if b > a => (b - a, r),
         _ => (wall, r),
     }
+}
+
+/// Lowest and highest value; `None` for no values.
+pub fn range(v: &[f64]) -> Option<(f64, f64)> {
+    let lo = v.iter().copied().min_by(f64::total_cmp)?;
+    let hi = v.iter().copied().max_by(f64::total_cmp)?;
+    Some((lo, hi))
 }
 
 /// Median (mean of the two middle values for an even count); `None` for no values.
@@ -537,20 +550,22 @@ impl fmt::Display for RayBenchReport {
                     self.threads,
                     s.ours_mt / (e * self.threads as f64)
                 )?;
-                if let Some(m) = s.pair_ratio_median {
-                    write!(f, "; median of the run-by-run 1t ratios {m:.2}x")?;
+                if let (Some(m), Some((lo, hi))) = (s.pair_ratio_median, s.pair_ratio_range) {
+                    write!(f, "; median of the run-by-run 1t ratios {m:.2}x (runs {lo:.2}-{hi:.2}x)")?;
                 }
             }
             writeln!(f)?;
             for p in &s.in_process {
                 writeln!(
                     f,
-                    "  {:<8} Embree in this process, {:<6} {:>6.2} Mrays/s (1t): ours/Embree 1t {:.2}x, median of the run-by-run ratios {:.2}x; hit/miss differs on {:.4}% of rays",
+                    "  {:<8} Embree in this process, {:<6} {:>6.2} Mrays/s (1t): ours/Embree 1t {:.2}x, median of the run-by-run ratios {:.2}x (runs {:.2}-{:.2}x); hit/miss differs on {:.4}% of rays",
                     "",
                     if p.robust { "robust" } else { "fast" },
                     p.best_1t * 1e-6,
                     s.ours_1t / p.best_1t,
                     p.pair_ratio_median,
+                    p.pair_ratio_range.0,
+                    p.pair_ratio_range.1,
                     p.hit_disagreement * 100.0
                 )?;
             }
@@ -622,7 +637,13 @@ pub fn displaced_sphere(n: u32, m: u32, style: SphereStyle) -> Mesh {
 
 #[cfg(test)]
 mod tests {
-    use super::median;
+    use super::{median, range};
+
+    #[test]
+    fn range_is_the_lowest_and_highest() {
+        assert_eq!(range(&[]), None);
+        assert_eq!(range(&[0.9, 0.7, 1.1, 0.8]), Some((0.7, 1.1)));
+    }
 
     #[test]
     fn median_of_odd_and_even_counts() {

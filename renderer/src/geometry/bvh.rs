@@ -21,6 +21,7 @@
 //! error), so no ray that crosses a triangle's edge can be culled or slip through.
 
 mod collapse;
+mod pages;
 mod tri4;
 
 use super::triangle;
@@ -31,6 +32,7 @@ use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::ploc::PlocBuilder;
 use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
+use pages::Pages;
 use std::hint::select_unpredictable;
 use std::mem::MaybeUninit;
 use tri4::{tri4_fast, tri4_scalar, Tri4, Tri4Result};
@@ -115,8 +117,8 @@ struct Node {
 }
 
 pub struct Bvh {
-    nodes: Vec<Node>,
-    blocks: Vec<Tri4>,
+    nodes: Pages<Node>,
+    blocks: Pages<Tri4>,
     /// Traversal stack entries the deepest path can need.
     stack_need: usize,
     /// Whether traversal prefetches the subtrees it stacks: only for a BVH larger than
@@ -285,8 +287,8 @@ impl Bvh {
         let bytes = nodes.len() * std::mem::size_of::<Node>() + blocks.len() * std::mem::size_of::<Tri4>();
         Bvh {
             prefetch_stacked: bytes > PREFETCH_MIN_BYTES,
-            nodes,
-            blocks,
+            nodes: Pages::new(nodes),
+            blocks: Pages::new(blocks),
             stack_need,
             #[cfg(target_arch = "x86_64")]
             avx2: avx2::Avx2::detect(),
@@ -336,6 +338,14 @@ impl Bvh {
         }
         let _ = enable;
         false
+    }
+
+    /// Whether the node and leaf arrays are on huge pages where they are large (the default,
+    /// `Pages`) or on ordinary ones (for A/B benchmarks: the same traversal).
+    pub fn set_huge_pages(&mut self, enable: bool) {
+        let (nodes, blocks) = (self.nodes.to_vec(), self.blocks.to_vec());
+        (self.nodes, self.blocks) =
+            if enable { (Pages::new(nodes), Pages::new(blocks)) } else { (Pages::in_vec(nodes), Pages::in_vec(blocks)) };
     }
 
     pub fn shape(&self) -> BvhShape {
@@ -705,7 +715,7 @@ mod tests {
         }
         let valid: Vec<u32> = (0..tris.len() as u32).collect();
         let bvh = Bvh::build(tris.clone(), valid, default_build_params(), node_cost(400));
-        let mut heap = Bvh::new(bvh.nodes.clone(), bvh.blocks.clone(), STACK + 1);
+        let mut heap = Bvh::new(bvh.nodes.to_vec(), bvh.blocks.to_vec(), STACK + 1);
         heap.stack_need = heap.stack_need.max(bvh.stack_need);
         let mut rng = crate::rng::Pcg32::new(5, 0);
         let mut hits = 0;

@@ -128,6 +128,11 @@ impl Accel {
         self.bvh.set_tri8(enable)
     }
 
+    /// Whether the BVH's arrays are on huge pages where large (see [`bvh::Bvh::set_huge_pages`]).
+    pub fn set_huge_pages(&mut self, enable: bool) {
+        self.bvh.set_huge_pages(enable)
+    }
+
     /// Shape of the BVH (node count, average fill).
     pub fn bvh_shape(&self) -> bvh::BvhShape {
         self.bvh.shape()
