@@ -7,7 +7,8 @@
 //! area heuristic) are blocks of four triangles stored side by side and tested together
 //! (`tri4.rs`; under AVX2 two blocks at a time). This file holds the layout and the traversal:
 //! children are visited nearest first, the stacked ones prefetched, and any stacked subtree that
-//! starts beyond the closest hit found so far is skipped.
+//! starts beyond the closest hit found so far is skipped. Large node and leaf arrays live on
+//! transparent huge pages (`pages.rs`).
 //!
 //! Why not obvhs's own CWBVH traversal (the previous version, 0.41–0.45× Embree): its node test
 //! dequantises child boxes on every visit, it orders children by ray octant rather than by
