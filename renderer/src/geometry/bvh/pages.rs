@@ -1,7 +1,7 @@
 //! The BVH's node and leaf arrays, on transparent huge pages where they are large. Traversal
 //! of a BVH larger than the caches touches a few scattered nodes and leaves a ray; with 4 KiB
 //! pages each is also a walk of the TLB (the displaced sphere's 5.6 MB are ~1,400 pages, past
-//! the first-level TLB's reach), with 2 MiB pages three entries cover it all. Linux backs an
+//! the first-level TLB's reach), with 2 MiB pages four entries cover it all. Linux backs an
 //! anonymous range with huge pages where it is aligned to 2 MiB and advised (`MADV_HUGEPAGE`;
 //! `/sys/kernel/mm/transparent_hugepage/enabled` is `madvise` on most distributions). Where the
 //! advice is refused or huge pages are off, the same memory stays on ordinary pages.
