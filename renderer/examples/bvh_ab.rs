@@ -3,10 +3,11 @@
 //! ray. Each variant is a node cost for the wide collapse (`Accel::build_tuned`), optionally
 //! followed by `:sse2` to force the SSE2 node test, `:avx2` for the AVX2 query without AVX-512's
 //! registers where the CPU has them, `:tri4` for the AVX2 node test with leaves
-//! tested one `Tri4` block at a time, `:tri8` two blocks at a time (the default; `:` also
-//! gives it), `:4k` for the BVH's arrays on ordinary pages instead of huge ones (`bvh::Pages`),
-//! and by an obvhs build preset (`:very_fast`, `:fast`, `:medium`, `:slow`; by
-//! default `bvh::build_params`'s, which depends on the mesh's size), e.g.
+//! tested one `Tri4` block at a time, `:tri8` two blocks at a time (the default except on
+//! a CPU that splits 256-bit operations, where `:tri4` is), `:4k` for the BVH's arrays on
+//! ordinary pages instead of huge ones (`bvh::Pages`), and by an obvhs build preset
+//! (`:very_fast`, `:fast`, `:medium`, `:slow`; by default `bvh::build_params`'s, which
+//! depends on the mesh's size), e.g.
 //! `REPS=7 cargo run --release -p renderer --example bvh_ab -- 3:sse2 3 4 3::slow`. Rays are
 //! traced one `intersect` after another in a loop (`bench::trace_one_at_a_time`), or, for a
 //! variant prefixed with `r` (`r5`), through `bench::trace`'s parallel iterator on the

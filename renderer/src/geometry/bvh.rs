@@ -329,8 +329,9 @@ impl Bvh {
         false
     }
 
-    /// Under AVX2, whether leaves are tested two `Tri4` blocks at a time (the default) or one
-    /// (for tests and A/B benchmarks: both give identical results); false without AVX2.
+    /// Under AVX2, whether leaves are tested two `Tri4` blocks at a time (the default, except
+    /// on a CPU that splits 256-bit operations, `avx2::splits_256_bit_operations`) or one (for
+    /// tests and A/B benchmarks: both give identical results); false without AVX2.
     pub fn set_tri8(&mut self, enable: bool) -> bool {
         #[cfg(target_arch = "x86_64")]
         if let Some(isa) = &mut self.avx2 {

@@ -17,9 +17,26 @@ pub(super) struct Avx2 {
 
 impl Avx2 {
     pub(super) fn detect() -> Option<Avx2> {
-        (is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"))
-            .then(|| Avx2 { tri8: true, avx512: is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("avx512vl") })
+        (is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")).then(|| Avx2 {
+            tri8: !splits_256_bit_operations(),
+            avx512: is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("avx512vl"),
+        })
     }
+}
+
+/// Whether this CPU executes each 256-bit operation as two 128-bit halves: AMD's first Zen
+/// generation and Zen+ (family 17h, models below 30h). There two `Tri4` blocks tested in one
+/// pass of 256-bit operations (`tri8_test`, paired by 128-bit inserts) gain nothing on
+/// testing them one at a time, and lose the exit after a missed first block: one at a time
+/// traced the displaced sphere's camera rays 3–4 % faster and the Cornell box's 4 % faster in
+/// one process (`bvh_ab e 5 5:tri4`, docs/performance.md, session 11).
+fn splits_256_bit_operations() -> bool {
+    let (v, l) = (__cpuid(0), __cpuid(1).eax);
+    // "AuthenticAMD" in EBX, EDX, ECX.
+    let amd = (v.ebx, v.edx, v.ecx) == (0x6874_7541, 0x6974_6e65, 0x444d_4163);
+    let family = ((l >> 8) & 0xf) + ((l >> 20) & 0xff);
+    let model = ((l >> 4) & 0xf) | ((l >> 12) & 0xf0);
+    amd && family == 0x17 && model < 0x30
 }
 
 impl NodeTest for Avx2 {
