@@ -13,7 +13,8 @@
 //! variant prefixed with `r` (`r5`), through `bench::trace`'s parallel iterator on the
 //! one-thread pool. The variant `e` is Embree in this process (`renderer::embree`, the library
 //! of `target/embree-venv`, fast mode; `er` its robust mode, `e2` kept to its AVX2 kernels, `eh` with
-//! its `hugepages=1` option), traced in the same kind of loop;
+//! its `hugepages=1` option, or the Embree device configuration in `EHCFG` if set, e.g.
+//! `EHCFG=verbose=2` to print its BVH's statistics), traced in the same kind of loop;
 //! `e16` and `er16` trace 16-ray packets (`rtcIntersect16`, as Mitsuba's `llvm_ad_rgb` does on
 //! an AVX-512 CPU), after checking that they answer as `rtcIntersect1` does.
 //! `MESH=cornell` or `MESH=sphere` runs one of the two meshes; `SPHERE_N=80` makes the sphere
@@ -41,7 +42,8 @@ fn main() {
             Embree::load_with_config(&path, config).unwrap_or_else(|e| panic!("{e}"))
         })
     };
-    let (embree, embree_avx2, embree_huge) = (lib(None), lib(Some("isa=avx2")), lib(Some("hugepages=1")));
+    let (embree, embree_avx2, embree_huge) =
+        (lib(None), lib(Some("isa=avx2")), lib(Some(std::env::var("EHCFG").ok().as_deref().unwrap_or("hugepages=1"))));
     let only = std::env::var("MESH").unwrap_or_default();
     for (name, mesh) in [
         ("cornell", scene.mesh.clone()),

@@ -168,7 +168,10 @@ impl RayData {
         let kz = 2 - z1 as usize - 2 * z0 as usize;
         let (kx, ky) = ((kz + 1) % 3, (kz + 2) % 3);
         let flip = dkz < 0.0;
-        let k = select_unpredictable(flip, [ky, kx, kz], [kx, ky, kz]);
+        // Element by element: a select of two arrays was compiled as two arrays stored and
+        // one read back through a pointer chosen by a cmov, in a 16-byte load that the
+        // 8-byte stores could not forward (3.5 % of the random rays' samples on Zen 4).
+        let k = [select_unpredictable(flip, ky, kx), select_unpredictable(flip, kx, ky), kz];
         let clamp = |x: f32| if x.abs() < MIN_DIR { MIN_DIR.copysign(x) } else { x };
         // The three reciprocals and the shear's 1/d[kz] in one division (each lane rounds as
         // the scalar division would): four scalar divisions were a latency chain at the start
@@ -571,10 +574,14 @@ impl Bvh {
             } else {
                 self.blocks.as_ptr().wrapping_add((c & ((1 << BLOCK_BITS) - 1)) as usize) as *const i8
             };
-            // A node's lines for either kind (a leaf: its first block and a half). A count by
-            // kind (4 or 2) made a loop whose exit mispredicted as the kinds alternate; fixed,
-            // the displaced sphere traced 3–5 % faster (docs/performance.md, "A Zen 1 machine").
-            const LINES: usize = std::mem::size_of::<Node>() / 64;
+            // Two nodes' lines for either kind: the child and the next node in the array,
+            // which the collapse writes as the child's sibling, often stacked too; of a leaf,
+            // its first three blocks, or its blocks and its sibling leaf's first. Four lines
+            // (one node) traced the displaced sphere's random rays 1–2 % slower on Zen 4
+            // (docs/performance.md, "A Zen 4 machine"). A count by kind made a loop whose exit
+            // mispredicted as the kinds alternate; fixed, the sphere traced 3–5 % faster
+            // ("A Zen 1 machine").
+            const LINES: usize = 2 * std::mem::size_of::<Node>() / 64;
             for l in 0..LINES {
                 // SAFETY: prefetching is a hint and never faults, even for an address outside
                 // the allocation (wrapping_add keeps the pointer arithmetic defined).
