@@ -578,9 +578,9 @@ impl Bvh {
             // which the collapse writes as the child's sibling, often stacked too; of a leaf,
             // its first three blocks, or its blocks and its sibling leaf's first. With four
             // lines (one node) the displaced sphere's random rays traced 1.4–5 % slower on
-            // Zen 4 in one process (docs/performance.md, "A Zen 4 machine"). A count by kind made a loop whose exit
-            // mispredicted as the kinds alternate; fixed, the sphere traced 3–5 % faster
-            // ("A Zen 1 machine").
+            // Zen 4 in one process (docs/performance.md, "A Zen 4 machine"). A count by kind
+            // made a loop whose exit mispredicted as the kinds alternate; fixed, the sphere
+            // traced 3–5 % faster ("A Zen 1 machine").
             const LINES: usize = 2 * std::mem::size_of::<Node>() / 64;
             for l in 0..LINES {
                 // SAFETY: prefetching is a hint and never faults, even for an address outside
