@@ -109,12 +109,16 @@ pub fn build_params(triangles: usize) -> BvhBuildParams {
 }
 
 /// One 8-wide node: child boxes as [min x, min y, min z, max x, max y, max z][group], lane i of
-/// group g being child 4g + i. Empty slots have an inverted infinite box, which no ray enters.
+/// group g being child 4g + i. Empty slots have an inverted infinite box and no bit in `valid`,
+/// by which the node test drops them (its per-axis nearer and farther plane would enter an
+/// inverted box).
 #[derive(Clone, Copy)]
 #[repr(C, align(64))]
 struct Node {
     b: [[Vec4; G]; 6],
     child: [u32; W],
+    /// Bit i set where slot i holds a child.
+    valid: u32,
 }
 
 pub struct Bvh {
@@ -137,9 +141,6 @@ struct RayData {
     /// Ray origin and conservative reciprocal direction, splatted.
     o: [Vec4; 3],
     inv: [Vec4; 3],
-    /// Box plane (index into `Node::b`) met first / last along each axis.
-    near: [usize; 3],
-    far: [usize; 3],
     /// Shear (Woop et al.): axes kx, ky, kz (kz dominant), factors sx, sy, sz, both splatted and
     /// scalar.
     k: [usize; 3],
@@ -179,14 +180,9 @@ impl RayData {
         let [ix, iy, iz, sz] = (Vec4::ONE / Vec4::new(clamp(d.x), clamp(d.y), clamp(d.z), dkz)).to_array();
         let (dkx, dky) = select_unpredictable(flip, (dky, dkx), (dkx, dky));
         let (sx, sy) = (dkx * sz, dky * sz);
-        // By the sign bit, as the clamped reciprocal keeps it: for d[i] = −0.0 (1/d = −1e20) the
-        // far plane is the minimum one.
-        let near = |i: usize| if d[i].is_sign_negative() { 3 + i } else { i };
         Some(RayData {
             o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
             inv: [Vec4::splat(ix), Vec4::splat(iy), Vec4::splat(iz)],
-            near: [near(0), near(1), near(2)],
-            far: [(near(0) + 3) % 6, (near(1) + 3) % 6, (near(2) + 3) % 6],
             k,
             s: [Vec4::splat(sx), Vec4::splat(sy), Vec4::splat(sz)],
             ss: [sx, sy, sz],
@@ -666,14 +662,18 @@ fn node_test(node: &Node, r: &RayData, tmax: f32) -> (u32, [f32; W]) {
     let mut tnear = [0.0f32; W];
     for g in 0..G {
         let t = |plane: usize, axis: usize| (node.b[plane][g] - r.o[axis]) * r.inv[axis];
+        // Entry and exit along each axis are the nearer and farther of its two planes, by a
+        // min and a max: planes picked per ray by the direction's signs cost the ray's setup
+        // and every visit six indexed loads (the Cornell box's rays traced 7–14 % slower).
+        let (x0, x1, y0, y1, z0, z1) = (t(0, 0), t(3, 0), t(1, 1), t(4, 1), t(2, 2), t(5, 2));
         // Rounding keeps signs, so a box behind the ray stays behind; scaling a distance
         // towards zero (entry) or away from it (exit) covers its rounding error.
-        let tn = t(r.near[0], 0).max(t(r.near[1], 1)).max(t(r.near[2], 2).max(Vec4::ZERO)) * lo;
-        let tf = t(r.far[0], 0).min(t(r.far[1], 1)).min(t(r.far[2], 2).min(tmax4)) * hi;
+        let tn = x0.min(x1).max(y0.min(y1)).max(z0.min(z1).max(Vec4::ZERO)) * lo;
+        let tf = x0.max(x1).min(y0.max(y1)).min(z0.max(z1).min(tmax4)) * hi;
         mask |= tn.cmple(tf).bitmask() << (4 * g);
         tnear[4 * g..4 * g + 4].copy_from_slice(&tn.to_array());
     }
-    (mask, tnear)
+    (mask & node.valid, tnear)
 }
 
 #[cfg(test)]

@@ -57,12 +57,16 @@ impl NodeTest for Avx2 {
             let lo = _mm256_set1_ps(1.0 - SLAB_WIDEN);
             let hi = _mm256_set1_ps(1.0 + SLAB_WIDEN);
             let zero = _mm256_setzero_ps();
-            let tn = _mm256_max_ps(_mm256_max_ps(t(r.near[0], 0), t(r.near[1], 1)), _mm256_max_ps(t(r.near[2], 2), zero));
-            let tf = _mm256_min_ps(_mm256_min_ps(t(r.far[0], 0), t(r.far[1], 1)), _mm256_min_ps(t(r.far[2], 2), _mm256_set1_ps(tmax)));
+            let (x0, x1, y0, y1, z0, z1) = (t(0, 0), t(3, 0), t(1, 1), t(4, 1), t(2, 2), t(5, 2));
+            let tn = _mm256_max_ps(_mm256_max_ps(_mm256_min_ps(x0, x1), _mm256_min_ps(y0, y1)), _mm256_max_ps(_mm256_min_ps(z0, z1), zero));
+            let tf = _mm256_min_ps(
+                _mm256_min_ps(_mm256_max_ps(x0, x1), _mm256_max_ps(y0, y1)),
+                _mm256_min_ps(_mm256_max_ps(z0, z1), _mm256_set1_ps(tmax)),
+            );
             let tn = _mm256_mul_ps(tn, lo);
             let tf = _mm256_mul_ps(tf, hi);
             _mm256_storeu_ps(tnear.as_mut_ptr(), tn);
-            _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32
+            _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32 & node.valid
         };
         (mask, tnear)
     }

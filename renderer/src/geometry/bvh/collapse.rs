@@ -198,7 +198,7 @@ impl<'a> Collapser<'a> {
 
 fn empty_node() -> Node {
     let inf = Vec4::INFINITY;
-    Node { b: [[inf; G], [inf; G], [inf; G], [-inf; G], [-inf; G], [-inf; G]], child: [u32::MAX; W] }
+    Node { b: [[inf; G], [inf; G], [inf; G], [-inf; G], [-inf; G], [-inf; G]], child: [u32::MAX; W], valid: 0 }
 }
 
 fn set_child(node: &mut Node, slot: usize, aabb: &Aabb, c: u32) {
@@ -208,4 +208,5 @@ fn set_child(node: &mut Node, slot: usize, aabb: &Aabb, c: u32) {
         node.b[3 + axis][g][l] = aabb.max[axis];
     }
     node.child[slot] = c;
+    node.valid |= 1 << slot;
 }
