@@ -508,3 +508,60 @@ fn offset_origin_near_the_world_origin_avoids_self_hits() {
     assert!(rays.len() > 30_000);
     assert_eq!(hits, 0, "self-hits near the world origin");
 }
+
+/// Rays that start a hair's breadth from a flat box and run along it, far from the world
+/// origin, to targets near the box's edges: the slab distance to the flat side is tiny next to
+/// the origin's magnitude, so a node test that rounds the origin's term on its own (as a fused
+/// p·inv − fl(o·inv) would, docs/performance.md, session 14) culls some of them unless the boxes
+/// are widened for it. Every ray must hit what the brute-force test hits, with the same t, on
+/// the AVX2 path (where the CPU has it) and the SSE2 one, rays from a million units away too.
+#[test]
+fn rays_along_a_flat_box_far_from_the_world_origin_hit() {
+    let mut rng = Pcg32::new(17, 0);
+    // A unit quad in the plane x = 100 (its box is flat in x), y and z in [100, 101].
+    let c = Vec3::new(100.0, 100.0, 100.0);
+    let positions = vec![c, c + Vec3::Y, c + Vec3::Y + Vec3::Z, c + Vec3::Z];
+    let mesh = mesh_from(positions, vec![[0, 1, 2], [0, 2, 3]]);
+    let mut accel = Accel::build(&mesh);
+    let mut rays = Vec::new();
+    for i in 0..20_000 {
+        // A target on the quad within 1e-3 of an edge, where the y and z slabs bound the hit.
+        let edge = |rng: &mut Pcg32| if rng.next_f32() < 0.5 { rng.next_f32() * 1e-3 } else { 1.0 - rng.next_f32() * 1e-3 };
+        let (ty, tz) = match i % 3 {
+            0 => (edge(&mut rng), rng.next_f32()),
+            1 => (rng.next_f32(), edge(&mut rng)),
+            _ => (edge(&mut rng), edge(&mut rng)),
+        };
+        let target = c + Vec3::new(0.0, ty, tz);
+        // An origin 1e-7 to 1e-2 off the plane, on either side, 0.5 to 2 away along it.
+        let eps = 10f32.powf(-7.0 + 5.0 * rng.next_f32()) * if rng.next_f32() < 0.5 { 1.0 } else { -1.0 };
+        let along = (rand3(&mut rng) * 2.0 - 1.0) * Vec3::new(0.0, 1.0, 1.0);
+        let along = along.normalize_or(Vec3::Y) * (0.5 + 1.5 * rng.next_f32());
+        let o = target - along + Vec3::new(eps, 0.0, 0.0);
+        rays.push((o, target - o));
+    }
+    // From far away.
+    for _ in 0..2_000 {
+        let target = c + Vec3::new(0.0, rng.next_f32(), rng.next_f32());
+        let o = target + (rand3(&mut rng) * 2.0 - 1.0).normalize_or(Vec3::X) * 1e6;
+        rays.push((o, target - o));
+    }
+    let run = |accel: &Accel| {
+        let mut hits = 0;
+        for &(o, d) in &rays {
+            let ray = Ray::new(o, d);
+            let want = brute_force(&mesh, &ray, f32::INFINITY);
+            let got = accel.intersect(&ray, f32::INFINITY);
+            assert_eq!(want.map(|w| w.0), got.map(|h| h.t), "ray {ray:?}");
+            assert_eq!(accel.occluded(&ray, f32::INFINITY), got.is_some(), "occluded disagrees for {ray:?}");
+            hits += got.is_some() as usize;
+        }
+        hits
+    };
+    let hits = run(&accel);
+    // Most rays are aimed inside the quad; those that start on its far side with the quad
+    // behind them miss in both tests.
+    assert!(hits > rays.len() / 3, "only {hits} of {} rays hit", rays.len());
+    accel.set_avx2(false);
+    assert_eq!(run(&accel), hits);
+}
