@@ -566,3 +566,55 @@ fn rays_along_a_flat_box_far_from_the_world_origin_hit() {
     accel.set_avx2(false);
     assert_eq!(run(&accel), hits);
 }
+
+/// Triangles so large that a ray's edge functions overflow (to infinity, or to NaN as the
+/// difference of two infinite products) and their sum `det` with them: the vector tests, which
+/// decide most misses by the edge functions' sign bits and do not test `det` itself, must still
+/// hit exactly what the scalar test hits, on every path.
+#[test]
+fn triangles_whose_edge_functions_overflow_hit_what_brute_force_hits() {
+    let mut rng = Pcg32::new(23, 0);
+    let mut mesh = mesh_from(Vec::new(), Vec::new());
+    // Products of sheared coordinates reach 1e34 to 1e40 (f32 overflows at 3.4e38).
+    let scales = [1e17f32, 1e18, 1e19, 4e19, 1e20];
+    for i in 0..400 {
+        let s = scales[i % scales.len()];
+        let c = (rand3(&mut rng) * 2.0 - 1.0) * s;
+        let p: Vec<Vec3> = (0..3).map(|_| c + (rand3(&mut rng) - 0.5) * s).collect();
+        mesh.append(&p, &[], &[], &[[0, 1, 2]], 0);
+    }
+    let mut accel = Accel::build(&mesh);
+    let mut rays = Vec::new();
+    for i in 0..20_000 {
+        // Aimed at a point inside a random triangle of the ray's scale, from up to that scale away.
+        let k = rng.next_u32() as usize % mesh.triangles.len();
+        let [p0, p1, p2] = mesh.triangle(k);
+        let (b1, b2) = (rng.next_f32(), rng.next_f32());
+        let (b1, b2) = if b1 + b2 > 1.0 { (1.0 - b1, 1.0 - b2) } else { (b1, b2) };
+        let target = p0 + (p1 - p0) * b1 + (p2 - p0) * b2;
+        let o = target + (rand3(&mut rng) * 2.0 - 1.0) * scales[i % scales.len()];
+        rays.push((o, target - o));
+    }
+    let run = |accel: &Accel| {
+        rays.iter()
+            .map(|&(o, d)| {
+                let ray = Ray::new(o, d);
+                let got = accel.intersect(&ray, f32::INFINITY);
+                assert_eq!(brute_force(&mesh, &ray, f32::INFINITY).map(|w| w.0.to_bits()), got.map(|h| h.t.to_bits()), "ray {ray:?}");
+                assert_eq!(accel.occluded(&ray, f32::INFINITY), got.is_some(), "occluded disagrees for {ray:?}");
+                got.map(|h| (h.t.to_bits(), h.prim))
+            })
+            .collect::<Vec<_>>()
+    };
+    accel.set_avx2(false);
+    let sse2 = run(&accel);
+    let hits = sse2.iter().filter(|h| h.is_some()).count();
+    // Most rays are aimed at a triangle; those of the largest scales miss where it overflows.
+    assert!(hits > rays.len() / 4, "only {hits} of {} rays hit", rays.len());
+    if accel.set_avx2(true) {
+        for tri8 in [true, false] {
+            accel.set_tri8(tri8);
+            assert_eq!(run(&accel), sse2, "tri8 {tri8}");
+        }
+    }
+}

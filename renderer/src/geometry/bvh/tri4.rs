@@ -65,26 +65,33 @@ pub(super) fn tri4_fast<const ANY: bool>(blk: &Tri4, r: &RayData, tmax: f32, tie
     if (u.cmpeq(zero) | v.cmpeq(zero) | w.cmpeq(zero)).any() {
         return Tri4Result::EdgeZero;
     }
-    let neg = u.cmplt(zero) | v.cmplt(zero) | w.cmplt(zero);
-    let pos = u.cmpgt(zero) | v.cmpgt(zero) | w.cmpgt(zero);
+    // A lane is missed by the ray's line where two of its edge functions (none zero, checked
+    // above) have opposite signs: their sign bits decide. Most blocks are missed so in every
+    // lane and skip the rest of the test.
+    let (su, sv, sw) = (u.is_negative_bitmask(), v.is_negative_bitmask(), w.is_negative_bitmask());
+    let apart = (su ^ sv) | (su ^ sw);
+    if apart == 0xf {
+        return Tri4Result::Miss;
+    }
+    // In the other lanes u, v and w are nonzero and of one sign, so their sum `det` is nonzero
+    // too; a NaN fails the comparisons of `ts`, and where `det` overflowed t is 0 or NaN below
+    // and fails `t > 0`.
     let det = u + v + w;
     let t_scaled = u * az + v * bz + w * cz;
-    let flip = det.cmplt(zero);
-    let ts = Vec4::select(flip, -t_scaled, t_scaled);
+    let ts = Vec4::select(det.cmplt(zero), -t_scaled, t_scaled);
     let dabs = det.abs();
     let tmax4 = Vec4::splat(tmax);
-    // Most blocks are missed, which the tests without the division decide: the division is
-    // only on the path of a possible hit.
+    // The division only on the path of a possible hit.
     let tw = Vec4::splat(tmax * triangle::RANGE_WIDEN);
-    let ok = !(neg & pos) & dabs.cmpgt(zero) & dabs.cmplt(Vec4::INFINITY) & ts.cmpgt(zero) & ts.cmplt(tw * dabs);
-    if !ok.any() {
+    let ok = (ts.cmpgt(zero) & ts.cmplt(tw * dabs)).bitmask() & !apart;
+    if ok == 0 {
         return Tri4Result::Miss;
     }
     let t = t_scaled / det;
-    let ahead = ok & t.cmpgt(zero);
-    let mut m = (ahead & t.cmplt(tmax4)).bitmask();
+    let ahead = ok & t.cmpgt(zero).bitmask();
+    let mut m = ahead & t.cmplt(tmax4).bitmask();
     if !ANY {
-        m |= ties(&blk.id, (ahead & t.cmpeq(tmax4)).bitmask(), tie_id);
+        m |= ties(&blk.id, ahead & t.cmpeq(tmax4).bitmask(), tie_id);
     }
     if m == 0 {
         return Tri4Result::Miss;
