@@ -27,7 +27,7 @@ mod tri4;
 
 use super::triangle;
 use collapse::Collapser;
-use glam::{Vec3, Vec3A, Vec4};
+use glam::{BVec4A, Vec3, Vec3A, Vec4, Vec4Swizzles};
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::ploc::PlocBuilder;
@@ -156,13 +156,16 @@ impl RayData {
         if !(ov * 0.0 + dv * 0.0).cmpeq(Vec3A::ZERO).all() {
             return None;
         }
-        // `triangle::shear_perm`'s axes, with the permuted components picked by selects rather
-        // than read back at a computed index (a store and a reload on the way to the division),
-        // and `select_unpredictable`, as LLVM otherwise branches on the dominant axis, which
-        // varies from ray to ray after the first bounce.
+        // `triangle::shear_perm`'s axes. The permuted components are picked by vector selects of
+        // swizzles: not read back at a computed index (a store and a reload on the way to the
+        // division), and not by scalar selects, which LLVM compiled as branches on the dominant
+        // axis and its sign even with `select_unpredictable` (four or five a ray, each taken
+        // either way at random for random rays).
         let a = d.abs();
         let (z0, z1) = ((a.x > a.y) & (a.x > a.z), !(a.x > a.y) & (a.y > a.z));
-        let (dkx, dky, dkz) = select_unpredictable(z0, (d.y, d.z, d.x), select_unpredictable(z1, (d.z, d.x, d.y), (d.x, d.y, d.z)));
+        let d4 = Vec4::new(d.x, d.y, d.z, 0.0);
+        let p = Vec4::select(BVec4A::splat(z0), d4.yzxw(), Vec4::select(BVec4A::splat(z1), d4.zxyw(), d4));
+        let dkz = p.z;
         if dkz == 0.0 {
             return None;
         }
@@ -178,7 +181,8 @@ impl RayData {
         // the scalar division would): four scalar divisions were a latency chain at the start
         // of every query.
         let [ix, iy, iz, sz] = (Vec4::ONE / Vec4::new(clamp(d.x), clamp(d.y), clamp(d.z), dkz)).to_array();
-        let (dkx, dky) = select_unpredictable(flip, (dky, dkx), (dkx, dky));
+        let p = Vec4::select(BVec4A::splat(flip), p.yxzw(), p);
+        let (dkx, dky) = (p.x, p.y);
         let (sx, sy) = (dkx * sz, dky * sz);
         Some(RayData {
             o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
