@@ -6,7 +6,7 @@ use super::tri4::{closest_lane, ties, tri4_test};
 use super::{HitRec, Node, NodeTest, Probe, RayData, Tri4, ANY_HIT, SLAB_WIDEN, W};
 use std::arch::x86_64::*;
 
-/// Proof that this CPU has AVX2 and FMA: only `detect` makes one. `tri8`: leaves are
+/// Proof that this CPU has AVX2, FMA and POPCNT: only `detect` makes one. `tri8`: leaves are
 /// tested two `Tri4` blocks at a time (`tri8_test`), else one at a time. `avx512`: the CPU
 /// also has AVX-512 F and VL, and queries run as `Bvh::query_avx512`.
 #[derive(Clone, Copy)]
@@ -17,7 +17,7 @@ pub(super) struct Avx2 {
 
 impl Avx2 {
     pub(super) fn detect() -> Option<Avx2> {
-        (is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")).then(|| Avx2 {
+        (is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") && is_x86_feature_detected!("popcnt")).then(|| Avx2 {
             tri8: !splits_256_bit_operations(),
             avx512: is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("avx512vl"),
         })
@@ -48,7 +48,7 @@ impl NodeTest for Avx2 {
     #[inline(always)]
     fn node_test(self, node: &Node, r: &RayData, tmax: f32) -> (u32, [f32; W]) {
         let mut tnear = [0.0f32; W];
-        // SAFETY: `self` exists only where `detect` found AVX2 and FMA on this CPU; the
+        // SAFETY: `self` exists only where `detect` found AVX2, FMA and POPCNT on this CPU; the
         // loads read one plane (8 floats, `plane`) and the store writes `tnear` (8 floats).
         let mask = unsafe {
             let plane = |p: usize| _mm256_loadu_ps(plane(&node.b[p]).as_ptr());
@@ -69,6 +69,23 @@ impl NodeTest for Avx2 {
             _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32 & node.valid
         };
         (mask, tnear)
+    }
+
+    /// `NodeTest::below` by one integer compare: the distances are not negative, so their bits
+    /// order as integers do, and with the lane in the low three bits no two keys are equal
+    /// (distances within eight units in the last place are ordered by lane, the higher below:
+    /// the order of visits, not the hits, may differ from the SSE2 path's).
+    #[inline(always)]
+    fn below(self, tnear: &[f32; W], c: usize) -> u32 {
+        // SAFETY: as in `node_test`; the load reads `tnear` (8 floats).
+        unsafe {
+            let keys = _mm256_or_si256(
+                _mm256_and_si256(_mm256_castps_si256(_mm256_loadu_ps(tnear.as_ptr())), _mm256_set1_epi32(!7)),
+                _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+            );
+            let key = _mm256_set1_epi32(((tnear[c].to_bits() & !7) | c as u32) as i32);
+            _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(keys, key))) as u32
+        }
     }
 
     #[inline(always)]
