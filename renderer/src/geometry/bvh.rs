@@ -503,12 +503,12 @@ impl Bvh {
                         continue;
                     }
                     // The hit children go on the stack, the nearest last, which is popped at
-                    // once, so it is the next node: distances decreasing upwards, of equal ones
-                    // the higher slot above. Chosen without branching on the distances, which
-                    // for incoherent rays compare either way at random: two children by a
-                    // select, more each straight to its place, the number of hit children
-                    // stacked below it (`NodeTest::below`). An insertion sort, branching on
-                    // every comparison, traced the displaced sphere's random rays 6-9 % slower
+                    // once, so it is the next node: distances decreasing upwards. Ordered
+                    // without branching on distances, which for incoherent rays compare either
+                    // way at random: two children by a select, more each straight to its
+                    // place, the number of hit children stacked below it (`NodeTest::below`,
+                    // which also orders equal distances). An insertion sort, branching on every
+                    // comparison, traced the displaced sphere's random rays 6-9 % slower
                     // (docs/performance.md). A shadow ray stops at any hit, so order only pays
                     // for closest hits.
                     if rest & (rest - 1) == 0 {
