@@ -20,7 +20,8 @@
 //! `MESH=cornell` or `MESH=sphere` runs one of the two meshes; `SPHERE_N=80` makes the sphere
 //! 80×80×2 triangles instead of 230×230×2 (to see the ratio with the mesh in cache), and
 //! `MISS=1` replaces the camera rays by rays that start far outside the mesh's box and point
-//! away from it (the per-ray setup and the root node's test alone).
+//! away from it (the per-ray setup and the root node's test alone). `SET=camera` or
+//! `SET=random` times one of the two ray sets (for a profile of one).
 
 use renderer::bench::{displaced_sphere, thread_cpu_seconds, trace, trace_one_at_a_time, RayBatch, SphereStyle};
 use renderer::embree::{library_in_venv, Embree, EmbreeScene};
@@ -129,7 +130,11 @@ fn main() {
                 println!("{name} {set} [{v}]: {differ} of {} rays answered differently by rtcIntersect1", batch.len());
             }
         }
+        let only_set = std::env::var("SET").unwrap_or_default();
         for (set, batch) in [("camera", &cam), ("random", &rnd)] {
+            if !only_set.is_empty() && only_set != set {
+                continue;
+            }
             let mut times = vec![Vec::new(); accels.len()];
             for _ in 0..reps {
                 for (i, ((a, e), v)) in accels.iter().zip(&scenes).zip(&variants).enumerate() {

@@ -79,9 +79,11 @@ const BLOCK_BITS: u32 = 27;
 /// Traversal stack entries kept on the call stack; deeper trees use a heap stack.
 const STACK: usize = 256;
 
-/// Relative widening of every slab distance. (p − o)·(1/d) is three roundings (of p − o, of
-/// 1/d and of the product) away from exact, at most 3·2^-24 relative; 2^-20 bounds that with
-/// margin, including the rounding of the widening product itself.
+/// Relative widening of every slab distance, applied to the reciprocal direction once a ray
+/// (`RayData::inv_lo`, `inv_hi`) rather than to each visit's distances, which put a multiply
+/// on the chain from a node's load to its mask. (p − o)·((1/d)·(1 ± w)) is four roundings (of
+/// p − o, of 1/d, of the scaling and of the product) away from (p − o)/d·(1 ± w), at most
+/// 4·2^-24 relative, which w = 2^-20 covers with margin.
 const SLAB_WIDEN: f32 = 1.0 / (1 << 20) as f32;
 /// Smallest |d| component used for the reciprocal. 1/1e-20 stays finite through every product in
 /// the box test for coordinates up to ~1e12, and an exactly axis-parallel ray then gets slabs
@@ -138,9 +140,11 @@ pub struct Bvh {
 
 /// Per-ray constants of the box and triangle tests.
 struct RayData {
-    /// Ray origin and conservative reciprocal direction, splatted.
+    /// Ray origin and reciprocal direction, splatted; the reciprocal scaled towards zero
+    /// (`inv_lo`, for entry distances) and away from it (`inv_hi`, exit) by `SLAB_WIDEN`.
     o: [Vec4; 3],
-    inv: [Vec4; 3],
+    inv_lo: [Vec4; 3],
+    inv_hi: [Vec4; 3],
     /// Shear (Woop et al.): axes kx, ky, kz (kz dominant), factors sx, sy, sz, both splatted and
     /// scalar.
     k: [usize; 3],
@@ -186,7 +190,8 @@ impl RayData {
         let (sx, sy) = (dkx * sz, dky * sz);
         Some(RayData {
             o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
-            inv: [Vec4::splat(ix), Vec4::splat(iy), Vec4::splat(iz)],
+            inv_lo: [Vec4::splat(ix * (1.0 - SLAB_WIDEN)), Vec4::splat(iy * (1.0 - SLAB_WIDEN)), Vec4::splat(iz * (1.0 - SLAB_WIDEN))],
+            inv_hi: [Vec4::splat(ix * (1.0 + SLAB_WIDEN)), Vec4::splat(iy * (1.0 + SLAB_WIDEN)), Vec4::splat(iz * (1.0 + SLAB_WIDEN))],
             k,
             s: [Vec4::splat(sx), Vec4::splat(sy), Vec4::splat(sz)],
             ss: [sx, sy, sz],
@@ -682,21 +687,22 @@ mod avx2;
 /// segment (0, tmax).
 #[inline(always)]
 fn node_test(node: &Node, r: &RayData, tmax: f32) -> (u32, [f32; W]) {
-    let lo = Vec4::splat(1.0 - SLAB_WIDEN);
-    let hi = Vec4::splat(1.0 + SLAB_WIDEN);
     let tmax4 = Vec4::splat(tmax);
     let mut mask = 0;
     let mut tnear = [0.0f32; W];
     for g in 0..G {
-        let t = |plane: usize, axis: usize| (node.b[plane][g] - r.o[axis]) * r.inv[axis];
+        let t = |plane: usize, axis: usize| {
+            let p = node.b[plane][g] - r.o[axis];
+            (p * r.inv_lo[axis], p * r.inv_hi[axis])
+        };
         // Entry and exit along each axis are the nearer and farther of its two planes, by a
         // min and a max: planes picked per ray by the direction's signs cost the ray's setup
         // and every visit six indexed loads (the Cornell box's rays traced 7–14 % slower).
-        let (x0, x1, y0, y1, z0, z1) = (t(0, 0), t(3, 0), t(1, 1), t(4, 1), t(2, 2), t(5, 2));
+        let ((x0, x0h), (x1, x1h), (y0, y0h), (y1, y1h), (z0, z0h), (z1, z1h)) = (t(0, 0), t(3, 0), t(1, 1), t(4, 1), t(2, 2), t(5, 2));
         // Rounding keeps signs, so a box behind the ray stays behind; scaling a distance
         // towards zero (entry) or away from it (exit) covers its rounding error.
-        let tn = x0.min(x1).max(y0.min(y1)).max(z0.min(z1).max(Vec4::ZERO)) * lo;
-        let tf = x0.max(x1).min(y0.max(y1)).min(z0.max(z1).min(tmax4)) * hi;
+        let tn = x0.min(x1).max(y0.min(y1)).max(z0.min(z1).max(Vec4::ZERO));
+        let tf = x0h.max(x1h).min(y0h.max(y1h)).min(z0h.max(z1h).min(tmax4));
         mask |= tn.cmple(tf).bitmask() << (4 * g);
         tnear[4 * g..4 * g + 4].copy_from_slice(&tn.to_array());
     }

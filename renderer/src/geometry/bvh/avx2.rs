@@ -3,7 +3,7 @@
 //! paths' floating-point operations (so the same hits bit for bit).
 
 use super::tri4::{closest_lane, ties, tri4_test};
-use super::{HitRec, Node, NodeTest, Probe, RayData, Tri4, ANY_HIT, SLAB_WIDEN, W};
+use super::{HitRec, Node, NodeTest, Probe, RayData, Tri4, ANY_HIT, W};
 use std::arch::x86_64::*;
 
 /// Proof that this CPU has AVX2, FMA and POPCNT: only `detect` makes one. `tri8`: leaves are
@@ -52,19 +52,17 @@ impl NodeTest for Avx2 {
         // loads read one plane (8 floats, `plane`) and the store writes `tnear` (8 floats).
         let mask = unsafe {
             let plane = |p: usize| _mm256_loadu_ps(plane(&node.b[p]).as_ptr());
-            let t =
-                |p: usize, axis: usize| _mm256_mul_ps(_mm256_sub_ps(plane(p), _mm256_set1_ps(r.o[axis].x)), _mm256_set1_ps(r.inv[axis].x));
-            let lo = _mm256_set1_ps(1.0 - SLAB_WIDEN);
-            let hi = _mm256_set1_ps(1.0 + SLAB_WIDEN);
+            let t = |p: usize, axis: usize| {
+                let d = _mm256_sub_ps(plane(p), _mm256_set1_ps(r.o[axis].x));
+                (_mm256_mul_ps(d, _mm256_set1_ps(r.inv_lo[axis].x)), _mm256_mul_ps(d, _mm256_set1_ps(r.inv_hi[axis].x)))
+            };
             let zero = _mm256_setzero_ps();
-            let (x0, x1, y0, y1, z0, z1) = (t(0, 0), t(3, 0), t(1, 1), t(4, 1), t(2, 2), t(5, 2));
+            let ((x0, x0h), (x1, x1h), (y0, y0h), (y1, y1h), (z0, z0h), (z1, z1h)) = (t(0, 0), t(3, 0), t(1, 1), t(4, 1), t(2, 2), t(5, 2));
             let tn = _mm256_max_ps(_mm256_max_ps(_mm256_min_ps(x0, x1), _mm256_min_ps(y0, y1)), _mm256_max_ps(_mm256_min_ps(z0, z1), zero));
             let tf = _mm256_min_ps(
-                _mm256_min_ps(_mm256_max_ps(x0, x1), _mm256_max_ps(y0, y1)),
-                _mm256_min_ps(_mm256_max_ps(z0, z1), _mm256_set1_ps(tmax)),
+                _mm256_min_ps(_mm256_max_ps(x0h, x1h), _mm256_max_ps(y0h, y1h)),
+                _mm256_min_ps(_mm256_max_ps(z0h, z1h), _mm256_set1_ps(tmax)),
             );
-            let tn = _mm256_mul_ps(tn, lo);
-            let tf = _mm256_mul_ps(tf, hi);
             _mm256_storeu_ps(tnear.as_mut_ptr(), tn);
             _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32 & node.valid
         };
