@@ -404,23 +404,45 @@ pub fn ray_bench(
             let (r, h) = rate(&accel, &pool_mt, batch, false);
             ours_mt = ours_mt.max(r);
             hits = h.iter().filter(|h| h.is_some()).count();
-            let (one, ours_hits) = rate(&accel, &pool_1t, batch, true);
-            ours_1t = ours_1t.max(one);
-            if let Some(embree_lib) = embree.and_then(|e| e.library.as_ref()) {
+            // Embree in this process: a scene of its own each run, as our BVH is rebuilt, built
+            // before either is traced, and traced on the thread ours is; who goes first
+            // alternates from run to run, so that neither always finds the caches as the
+            // other left them.
+            let embree_lib = embree.and_then(|e| e.library.as_ref());
+            let mut scenes = Vec::new();
+            if let Some(embree_lib) = embree_lib {
                 for runs in &mut lib {
-                    // A scene of its own each run, as our BVH is rebuilt; traced on this thread.
                     let t0 = Instant::now();
                     let scene = embree_lib.scene(mesh, runs.robust).map_err(|e| Error::Invalid(e.to_string()))?;
                     runs.build = runs.build.min(t0.elapsed().as_secs_f64());
-                    let (secs, theirs) = seconds_on_this_thread(|| {
-                        (0..batch.len()).map(|i| scene.intersect(batch.origins[i], batch.dirs[i], batch.tmax[i])).collect::<Vec<_>>()
-                    });
-                    let their_rate = batch.len() as f64 / secs;
-                    runs.ratios.push(one / their_rate);
-                    runs.best = runs.best.max(their_rate);
-                    let differ = ours_hits.iter().zip(&theirs).filter(|(a, b)| a.is_some() != b.is_some()).count();
-                    runs.disagreement = differ as f64 / batch.len().max(1) as f64;
+                    scenes.push(scene);
                 }
+            }
+            let theirs_first = rep % 2 == 1;
+            let trace_theirs = |scenes: &[crate::embree::EmbreeScene]| {
+                scenes
+                    .iter()
+                    .map(|scene| {
+                        pool_1t.install(|| {
+                            seconds_on_this_thread(|| {
+                                (0..batch.len())
+                                    .map(|i| scene.intersect(batch.origins[i], batch.dirs[i], batch.tmax[i]))
+                                    .collect::<Vec<_>>()
+                            })
+                        })
+                    })
+                    .collect::<Vec<_>>()
+            };
+            let early = if theirs_first { trace_theirs(&scenes) } else { Vec::new() };
+            let (one, ours_hits) = rate(&accel, &pool_1t, batch, true);
+            ours_1t = ours_1t.max(one);
+            let theirs = if theirs_first { early } else { trace_theirs(&scenes) };
+            for (runs, (secs, theirs)) in lib.iter_mut().zip(theirs) {
+                let their_rate = batch.len() as f64 / secs;
+                runs.ratios.push(one / their_rate);
+                runs.best = runs.best.max(their_rate);
+                let differ = ours_hits.iter().zip(&theirs).filter(|(a, b)| a.is_some() != b.is_some()).count();
+                runs.disagreement = differ as f64 / batch.len().max(1) as f64;
             }
             if let Some(e) = embree {
                 let r = embree_trace(&e.python, &e.script, &e.work_dir, mesh, batch, e.robust)?;
