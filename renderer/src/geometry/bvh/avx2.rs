@@ -81,7 +81,9 @@ impl NodeTest for Avx2 {
                 _mm256_and_si256(_mm256_castps_si256(_mm256_loadu_ps(tnear.as_ptr())), _mm256_set1_epi32(!7)),
                 _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
             );
-            let key = _mm256_set1_epi32(((tnear[c].to_bits() & !7) | c as u32) as i32);
+            // Lane c's key picked from the keys in a register, not rebuilt from `tnear[c]` read
+            // back through memory.
+            let key = _mm256_permutevar8x32_epi32(keys, _mm256_set1_epi32(c as i32));
             _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(keys, key))) as u32
         }
     }
