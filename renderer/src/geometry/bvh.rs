@@ -745,6 +745,91 @@ mod tests {
         assert!(checked > 10_000, "only {checked} directions had a shear");
     }
 
+    /// The node tests never cull a child box that the ray segment (0, tmax) touches, and never
+    /// put its entry past the true one (traversal culls stacked children by it): checked
+    /// against the slab test in f64, whose error is far below `SLAB_WIDEN`, on lines aimed at
+    /// box edges and corners (so that entry and exit nearly meet), at scales 1e-3 to 1e4, with
+    /// flat boxes and segments ending at the box. Without the widening (`SLAB_WIDEN` = 0) the
+    /// f32 test culls some of these boxes.
+    #[test]
+    fn node_tests_never_cull_a_box_the_segment_touches() {
+        let mut rng = crate::rng::Pcg32::new(23, 0);
+        let (mut checked, mut close) = (0, 0);
+        for _ in 0..5000 {
+            let scale = 10f32.powi(rng.below(8) as i32 - 3);
+            let o = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5) * 4.0 * scale;
+            let d = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5);
+            // Components below `MIN_DIR`'s clamp would test a slightly different line.
+            if d.abs().min_element() < 1e-3 {
+                continue;
+            }
+            let Some(r) = RayData::new(o, d) else { continue };
+            let mut node = Node { b: [[Vec4::ZERO; G]; 6], child: [0; W], valid: (1 << W) - 1 };
+            let mut tmax = [f32::INFINITY; W];
+            for (lane, seg) in tmax.iter_mut().enumerate() {
+                let lo = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 * scale - 2.0 * scale;
+                let ext = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * scale;
+                // Every fourth box flat along one axis.
+                let ext = if lane % 4 == 0 { ext * Vec3::new(0.0, 1.0, 1.0) } else { ext };
+                let hi = lo + ext;
+                // A point on an edge or corner of the box, the line from o through it.
+                let mut p = lo + ext * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+                for axis in 0..3 {
+                    if rng.next_f32() < 0.7 {
+                        p[axis] = if rng.next_f32() < 0.5 { lo[axis] } else { hi[axis] };
+                    }
+                }
+                let s = (p - o).dot(d) / d.length_squared();
+                // The line through o along d passes p's projection; shift the box so that p
+                // lies on the line (up to f32 rounding, which makes entry and exit nearly meet).
+                let shift = o + d * s - p;
+                let (lo, hi) = (lo + shift, hi + shift);
+                for axis in 0..3 {
+                    node.b[axis][lane / 4][lane % 4] = lo[axis];
+                    node.b[3 + axis][lane / 4][lane % 4] = hi[axis];
+                }
+                // Some segments end at the point itself.
+                if rng.next_f32() < 0.25 && s > 0.0 {
+                    *seg = s;
+                }
+            }
+            let (node, r) = (&node, &r);
+            type Test<'a> = Box<dyn Fn(f32) -> (u32, [f32; W]) + 'a>;
+            let mut isas: Vec<Test> = vec![Box::new(move |t| node_test(node, r, t))];
+            #[cfg(target_arch = "x86_64")]
+            if let Some(a) = avx2::Avx2::detect() {
+                isas.push(Box::new(move |t| a.node_test(node, r, t)));
+            }
+            for lane in 0..W {
+                let (mut entry, mut exit) = (0.0f64, tmax[lane] as f64);
+                for axis in 0..3 {
+                    let (ta, tb) = (
+                        (node.b[axis][lane / 4][lane % 4] as f64 - o[axis] as f64) / d[axis] as f64,
+                        (node.b[3 + axis][lane / 4][lane % 4] as f64 - o[axis] as f64) / d[axis] as f64,
+                    );
+                    entry = entry.max(ta.min(tb));
+                    exit = exit.min(ta.max(tb));
+                }
+                if entry > exit {
+                    continue;
+                }
+                checked += 1;
+                close += (exit - entry <= 1e-6 * entry.abs().max(exit.abs())) as usize;
+                for test in &isas {
+                    let (mask, tnear) = test(tmax[lane]);
+                    assert!(
+                        mask >> lane & 1 == 1,
+                        "culled: box {lane} of {:?}, ray {o} {d}, tmax {}, entry {entry} exit {exit}",
+                        node.b,
+                        tmax[lane]
+                    );
+                    assert!(tnear[lane] as f64 <= entry, "entry {} past {entry}", tnear[lane]);
+                }
+            }
+        }
+        assert!(checked > 10_000 && close > 1000, "{checked} boxes touched, {close} of them nearly at a single point");
+    }
+
     /// The heap stack (for trees deeper than `STACK` allows) gives the same answers as the
     /// fixed one, and a mesh of nested triangles at scales 1 … 2^-40 (a deep binary tree)
     /// still matches the scalar test on every triangle.
