@@ -296,7 +296,7 @@ fn offset_origin_avoids_self_hits_and_leaks() {
 /// time (the default) or one, and the SSE2 one (the x86-64 baseline, and what every other CPU
 /// runs) give identical answers: same t, triangle and
 /// barycentrics bit for bit, and the same shadow-ray answers, on camera rays (a quarter aimed at
-/// shared edges), random rays and short segments, over a displaced sphere and a triangle soup.
+/// shared edges), random rays, short segments and axis-parallel rays, over a displaced sphere and a triangle soup.
 #[test]
 fn avx2_and_sse2_node_tests_agree() {
     use crate::bench::{displaced_sphere, RayBatch, SphereStyle};
@@ -315,6 +315,14 @@ fn avx2_and_sse2_node_tests_agree() {
             // Every third random ray a short segment, so tmax culls.
             let tmax = if i % 3 == 0 { rnd.tmax[i].min(rng.next_f32()) } else { rnd.tmax[i] };
             batch.push(rnd.origins[i], rnd.dirs[i], tmax);
+        }
+        // Axis-parallel rays, the other components +0.0 or −0.0: the AVX2 test picks each axis's
+        // entry plane by the sign of the clamped reciprocal, the SSE2 one by a min.
+        for i in 0..3000 {
+            let z = |bit: usize| if i >> bit & 1 == 0 { 0.0 } else { -0.0 };
+            let mut d = Vec3::new(z(2), z(3), z(4));
+            d[i % 3] = if i >> 5 & 1 == 0 { 1.0 } else { -1.0 };
+            batch.push(rnd.origins[i], d, rnd.tmax[i]);
         }
         let run = |accel: &Accel| {
             (0..batch.len())

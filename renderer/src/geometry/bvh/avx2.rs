@@ -52,17 +52,26 @@ impl NodeTest for Avx2 {
         // loads read one plane (8 floats, `plane`) and the store writes `tnear` (8 floats).
         let mask = unsafe {
             let plane = |p: usize| _mm256_loadu_ps(plane(&node.b[p]).as_ptr());
-            let t = |p: usize, axis: usize| {
-                let d = _mm256_sub_ps(plane(p), _mm256_set1_ps(r.o[axis].x));
-                (_mm256_mul_ps(d, _mm256_set1_ps(r.inv_lo[axis].x)), _mm256_mul_ps(d, _mm256_set1_ps(r.inv_hi[axis].x)))
-            };
+            // Per axis, the plane the ray enters by and the one it leaves by, picked by the
+            // sign of its reciprocal direction (a blend on the sign bit): the same values as the
+            // minimum and maximum of the two planes' distances (rounding is monotonic), with one
+            // product per plane instead of two and a blend instead of a min on the way to the
+            // mask. Empty slots' inverted boxes still give an entry past the exit.
+            // A macro: this closure was not inlined (a call per axis and visit).
+            macro_rules! t {
+                ($axis:literal) => {{
+                    let (lo, hi) = (plane($axis), plane($axis + 3));
+                    let (il, ih) = (_mm256_set1_ps(r.inv_lo[$axis].x), _mm256_set1_ps(r.inv_hi[$axis].x));
+                    let o = _mm256_set1_ps(r.o[$axis].x);
+                    let near = _mm256_sub_ps(_mm256_blendv_ps(lo, hi, il), o);
+                    let far = _mm256_sub_ps(_mm256_blendv_ps(hi, lo, il), o);
+                    (_mm256_mul_ps(near, il), _mm256_mul_ps(far, ih))
+                }};
+            }
             let zero = _mm256_setzero_ps();
-            let ((x0, x0h), (x1, x1h), (y0, y0h), (y1, y1h), (z0, z0h), (z1, z1h)) = (t(0, 0), t(3, 0), t(1, 1), t(4, 1), t(2, 2), t(5, 2));
-            let tn = _mm256_max_ps(_mm256_max_ps(_mm256_min_ps(x0, x1), _mm256_min_ps(y0, y1)), _mm256_max_ps(_mm256_min_ps(z0, z1), zero));
-            let tf = _mm256_min_ps(
-                _mm256_min_ps(_mm256_max_ps(x0h, x1h), _mm256_max_ps(y0h, y1h)),
-                _mm256_min_ps(_mm256_max_ps(z0h, z1h), _mm256_set1_ps(tmax)),
-            );
+            let ((xn, xf), (yn, yf), (zn, zf)) = (t!(0), t!(1), t!(2));
+            let tn = _mm256_max_ps(_mm256_max_ps(xn, yn), _mm256_max_ps(zn, zero));
+            let tf = _mm256_min_ps(_mm256_min_ps(xf, yf), _mm256_min_ps(zf, _mm256_set1_ps(tmax)));
             _mm256_storeu_ps(tnear.as_mut_ptr(), tn);
             _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32 & node.valid
         };
