@@ -3,7 +3,7 @@
 //! 2017, "Efficient incoherent ray traversal on GPUs through compressed wide BVHs") into an
 //! 8-wide BVH of our own layout — float child boxes in structure-of-arrays form, tested all
 //! eight at once with AVX2 where the CPU has it (detected at run time, `avx2.rs`), else four at
-//! a time with SSE2, bit-identically — whose leaves (up to 16 triangles, chosen by the surface
+//! a time with SSE2, with the same hits — whose leaves (up to 16 triangles, chosen by the surface
 //! area heuristic) are blocks of four triangles stored side by side and tested together
 //! (`tri4.rs`; under AVX2 two blocks at a time). This file holds the layout and the traversal:
 //! children are visited nearest first, the stacked ones prefetched, and any stacked subtree that
@@ -85,6 +85,12 @@ const STACK: usize = 256;
 /// p − o, of 1/d, of the scaling and of the product) away from (p − o)/d·(1 ± w), at most
 /// 4·2^-24 relative, which w = 2^-20 covers with margin.
 const SLAB_WIDEN: f32 = 1.0 / (1 << 20) as f32;
+/// The AVX2 node test's distances are fma(p, inv, c) with c ≈ −o·inv: the product p·inv is
+/// rounded relative to |p·inv| ≤ |o·inv| + |t| (not to |t|, as (p − o)·inv is), and c twice
+/// relative to |o·inv|. Five roundings of at most 2^-24·|o·inv| each, so each axis's entry is
+/// moved down and its exit up by |o·inv|·2^-19 (32 × 2^-24, in `RayData::c_lo`, `c_hi`); the
+/// parts relative to |t| are `SLAB_WIDEN`'s. A box grows by about |o|·2^-19 in world units.
+const FMA_WIDEN: f32 = 1.0 / (1 << 19) as f32;
 /// Smallest |d| component used for the reciprocal. 1/1e-20 stays finite through every product in
 /// the box test for coordinates up to ~1e12, and an exactly axis-parallel ray then gets slabs
 /// that extend ~1e20 · (distance to the plane) — far beyond any scene.
@@ -145,6 +151,11 @@ struct RayData {
     o: [Vec4; 3],
     inv_lo: [Vec4; 3],
     inv_hi: [Vec4; 3],
+    /// −o·inv_lo − e and −o·inv_hi + e per axis, for the AVX2 node test's fused
+    /// p·inv + c (`avx2::node_test`): e = |o·inv|·`FMA_WIDEN` covers the rounding of these
+    /// products, which is relative to o·inv rather than to the distance.
+    c_lo: [Vec4; 3],
+    c_hi: [Vec4; 3],
     /// Shear (Woop et al.): axes kx, ky, kz (kz dominant), factors sx, sy, sz, both splatted and
     /// scalar.
     k: [usize; 3],
@@ -188,8 +199,13 @@ impl RayData {
         let p = Vec4::select(BVec4A::splat(flip), p.yxzw(), p);
         let (dkx, dky) = (p.x, p.y);
         let (sx, sy) = (dkx * sz, dky * sz);
+        let (il, ih) = (Vec3::new(ix, iy, iz) * (1.0 - SLAB_WIDEN), Vec3::new(ix, iy, iz) * (1.0 + SLAB_WIDEN));
+        let e = (o * Vec3::new(ix, iy, iz)).abs() * FMA_WIDEN;
+        let (c_lo, c_hi) = (-(o * il) - e, -(o * ih) + e);
         Some(RayData {
             o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
+            c_lo: [Vec4::splat(c_lo.x), Vec4::splat(c_lo.y), Vec4::splat(c_lo.z)],
+            c_hi: [Vec4::splat(c_hi.x), Vec4::splat(c_hi.y), Vec4::splat(c_hi.z)],
             inv_lo: [Vec4::splat(ix * (1.0 - SLAB_WIDEN)), Vec4::splat(iy * (1.0 - SLAB_WIDEN)), Vec4::splat(iz * (1.0 - SLAB_WIDEN))],
             inv_hi: [Vec4::splat(ix * (1.0 + SLAB_WIDEN)), Vec4::splat(iy * (1.0 + SLAB_WIDEN)), Vec4::splat(iz * (1.0 + SLAB_WIDEN))],
             k,
@@ -439,8 +455,9 @@ impl Bvh {
     }
 
     /// `query` with the AVX2 node test, compiled with AVX2 and FMA enabled (so the rest of the
-    /// query, inlined here, is VEX-encoded too; no operation changes, Rust never fuses a
-    /// multiply and an add by itself, so results stay bit-identical to the SSE2 path).
+    /// query, inlined here, is VEX-encoded too; Rust never fuses a multiply and an add by
+    /// itself, so only the node test's explicit ones differ, and results stay bit-identical to
+    /// the SSE2 path's, `avx2::node_test`).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,popcnt")]
     ///
@@ -757,7 +774,14 @@ mod tests {
         let (mut checked, mut close) = (0, 0);
         for _ in 0..5000 {
             let scale = 10f32.powi(rng.below(8) as i32 - 3);
-            let o = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5) * 4.0 * scale;
+            // Half the rays and their boxes 10^2 to 10^5 times their size from the world origin,
+            // where the AVX2 test's fused distances round relative to |o·inv| (`FMA_WIDEN`).
+            let base = if rng.next_f32() < 0.5 {
+                Vec3::ZERO
+            } else {
+                Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5) * 10f32.powi(rng.below(4) as i32 + 2) * scale
+            };
+            let o = base + Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5) * 4.0 * scale;
             let d = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5);
             // Components below `MIN_DIR`'s clamp would test a slightly different line.
             if d.abs().min_element() < 1e-3 {
@@ -767,7 +791,7 @@ mod tests {
             let mut node = Node { b: [[Vec4::ZERO; G]; 6], child: [0; W], valid: (1 << W) - 1 };
             let mut tmax = [f32::INFINITY; W];
             for (lane, seg) in tmax.iter_mut().enumerate() {
-                let lo = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 * scale - 2.0 * scale;
+                let lo = base + Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 * scale - 2.0 * scale;
                 let ext = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * scale;
                 // Every fourth box flat along one axis.
                 let ext = if lane % 4 == 0 { ext * Vec3::new(0.0, 1.0, 1.0) } else { ext };

@@ -1,6 +1,9 @@
 //! The AVX2 and FMA paths of the BVH query, chosen at run time: the eight children of a node
-//! tested in one 256-bit operation and leaves two `Tri4` blocks at a time, with exactly the SSE2
-//! paths' floating-point operations (so the same hits bit for bit).
+//! tested in one 256-bit operation and leaves two `Tri4` blocks at a time. The leaf test has
+//! exactly the SSE2 path's floating-point operations; the node test has its own (one fused
+//! multiply-add per plane), conservative as the SSE2 one is, so both visit every box a ray
+//! touches and the closest hit, found by the same triangle test and the same rule for ties,
+//! is the same bit for bit.
 
 use super::tri4::{closest_lane, ties, tri4_test};
 use super::{HitRec, Node, NodeTest, Probe, RayData, Tri4, ANY_HIT, W};
@@ -40,9 +43,10 @@ fn splits_256_bit_operations() -> bool {
 }
 
 impl NodeTest for Avx2 {
-    /// `super::node_test` with all eight children in one 256-bit register: the same
-    /// operations in the same order (max and min take their operands as glam's do), so the
-    /// mask and distances are bit-identical and the conservative widening is unchanged.
+    /// `super::node_test` with all eight children in one 256-bit register, each plane's
+    /// distance as fma(p, inv, c) rather than (p − o)·inv: one operation fewer on the way from
+    /// a node's load to its mask, and distances that differ from the SSE2 test's by roundings,
+    /// which `FMA_WIDEN` covers (its comment has the argument), so the test stays conservative.
     /// Not a `#[target_feature]` function itself, which Rust may not inline: it is inlined
     /// into `Bvh::query_avx2`, which has the features, and only compiled there.
     #[inline(always)]
@@ -62,10 +66,8 @@ impl NodeTest for Avx2 {
                 ($axis:literal) => {{
                     let (lo, hi) = (plane($axis), plane($axis + 3));
                     let (il, ih) = (_mm256_set1_ps(r.inv_lo[$axis].x), _mm256_set1_ps(r.inv_hi[$axis].x));
-                    let o = _mm256_set1_ps(r.o[$axis].x);
-                    let near = _mm256_sub_ps(_mm256_blendv_ps(lo, hi, il), o);
-                    let far = _mm256_sub_ps(_mm256_blendv_ps(hi, lo, il), o);
-                    (_mm256_mul_ps(near, il), _mm256_mul_ps(far, ih))
+                    let (cl, ch) = (_mm256_set1_ps(r.c_lo[$axis].x), _mm256_set1_ps(r.c_hi[$axis].x));
+                    (_mm256_fmadd_ps(_mm256_blendv_ps(lo, hi, il), il, cl), _mm256_fmadd_ps(_mm256_blendv_ps(hi, lo, il), ih, ch))
                 }};
             }
             let zero = _mm256_setzero_ps();
