@@ -4,7 +4,9 @@
 //! median of `REPS` runs in paths per CPU second of the thread, and each variant's rate
 //! against the first one's, repetition by repetition. Checks that every variant returns the
 //! same bits. A variant followed by `n` (`2n`) runs without the packet query
-//! (`Accel::drop_packets`), the closest hits then one BVH query at a time.
+//! (`Accel::drop_packets`), the closest hits then one BVH query at a time; followed by `s`
+//! (`2s`), with the packet query for closest hits only, the shadow rays one BVH query at a time
+//! (`Accel::set_packet_shadows`).
 use glam::Vec2;
 use renderer::bench::thread_cpu_seconds;
 use renderer::integrator::wave::{trace_batch_variant, LaneResult, LANES};
@@ -14,9 +16,12 @@ use std::path::Path;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let variants: Vec<(u8, bool)> = args
+    let variants: Vec<(u8, char)> = args
         .iter()
-        .map(|a| (a.trim_end_matches('n').parse().expect("variant 0, 1 or 2, optionally followed by n"), a.ends_with('n')))
+        .map(|a| {
+            let mode = a.chars().last().filter(|c| matches!(c, 'n' | 's')).unwrap_or(' ');
+            (a.trim_end_matches(['n', 's']).parse().expect("variant 0, 1 or 2, optionally followed by n or s"), mode)
+        })
         .collect();
     let reps: usize = std::env::var("REPS").ok().and_then(|s| s.parse().ok()).unwrap_or(7);
     let spp: u32 = std::env::var("SPP").ok().and_then(|s| s.parse().ok()).unwrap_or(4);
@@ -24,8 +29,10 @@ fn main() {
     let scene = Scene::load(&ws.join("scenes/cornell-box/scene.toml")).expect("scene");
     let mut bvh_only = Scene::load(&ws.join("scenes/cornell-box/scene.toml")).expect("scene");
     if !bvh_only.accel.drop_packets() {
-        eprintln!("note: no packet query here (mesh too large or no AVX-512): `n` variants are the same");
+        eprintln!("note: no packet query here (mesh too large or no AVX-512): `n` and `s` variants are the same");
     }
+    let mut bvh_shadows = Scene::load(&ws.join("scenes/cornell-box/scene.toml")).expect("scene");
+    bvh_shadows.accel.set_packet_shadows(false);
     let cam = &scene.camera;
     let mut starts = Vec::new();
     for py in 0..cam.height {
@@ -38,8 +45,12 @@ fn main() {
             }
         }
     }
-    let run = |(v, no_packets): (u8, bool)| -> (f64, Vec<LaneResult>) {
-        let scene = if no_packets { &bvh_only } else { &scene };
+    let run = |(v, mode): (u8, char)| -> (f64, Vec<LaneResult>) {
+        let scene = match mode {
+            'n' => &bvh_only,
+            's' => &bvh_shadows,
+            _ => &scene,
+        };
         let mut out = Vec::with_capacity(starts.len());
         let t0 = thread_cpu_seconds().expect("thread clock");
         for chunk in starts.chunks(LANES) {

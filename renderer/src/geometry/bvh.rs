@@ -84,7 +84,7 @@ const STACK: usize = 256;
 /// on the chain from a node's load to its mask. (p − o)·((1/d)·(1 ± w)) is four roundings (of
 /// p − o, of 1/d, of the scaling and of the product) away from (p − o)/d·(1 ± w), at most
 /// 4·2^-24 relative, which w = 2^-20 covers with margin.
-const SLAB_WIDEN: f32 = 1.0 / (1 << 20) as f32;
+pub(super) const SLAB_WIDEN: f32 = 1.0 / (1 << 20) as f32;
 /// The AVX2 node test's distances are fma(p, inv, c) with c ≈ −o·inv: the product p·inv is
 /// rounded relative to |p·inv| ≤ |o·inv| + |t| (not to |t|, as (p − o)·inv is), and c twice
 /// relative to |o·inv|. Five roundings of at most 2^-24·|o·inv| each, so each axis's entry is
@@ -94,7 +94,7 @@ const FMA_WIDEN: f32 = 1.0 / (1 << 19) as f32;
 /// Smallest |d| component used for the reciprocal. 1/1e-20 stays finite through every product in
 /// the box test for coordinates up to ~1e12, and an exactly axis-parallel ray then gets slabs
 /// that extend ~1e20 · (distance to the plane) — far beyond any scene.
-const MIN_DIR: f32 = 1e-20;
+pub(super) const MIN_DIR: f32 = 1e-20;
 
 /// Build parameters, chosen by measurement: with this BVH, obvhs's presets from
 /// `very_fast_build` to `slow_build` (pre-splits, wider PLOC search, more reinsertion) traced the

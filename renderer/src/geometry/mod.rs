@@ -164,6 +164,12 @@ impl Accel {
         self.packets.take().is_some()
     }
 
+    /// Whether the integrator's shadow rays use the packet query (the default) or the BVH one
+    /// by one (for A/B benchmarks); returns whether there is a packet query.
+    pub fn set_packet_shadows(&mut self, on: bool) -> bool {
+        self.packets.as_mut().map(|p| p.set_shadows(on)).is_some()
+    }
+
     /// Closest hits with t in (0, tmax) of the rays `rays[i]` with `live[i]`, into `out[i]`
     /// (`None` for the others): through the packet query, sixteen rays at a time, where this
     /// mesh and CPU have one and at least `packet::MIN_LANES` rays are left; else one by one.

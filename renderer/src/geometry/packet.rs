@@ -1,5 +1,9 @@
-//! Closest hits of up to sixteen rays at once on a small mesh, without a BVH: every triangle is
-//! tested against all the rays together, one ray per lane of a 512-bit register (AVX-512).
+//! Closest hits and shadow rays' any hits of up to sixteen rays at once on a small mesh, without
+//! a BVH: every triangle is tested against all the rays together, one ray per lane of a
+//! 512-bit register (AVX-512), skipping clusters of up to four nearby triangles whose box no
+//! lane enters (the BVH's box test, lane by lane). In the Cornell box's wavefront 31 % of the
+//! shadow packets' cluster tests skip their triangles and 23 % of the closest-hit packets'
+//! (`SPP=1 wave_ab 2`, counted once; docs/performance.md, session 18).
 //!
 //! On a mesh of a few dozen triangles (McGuire's Cornell box has 36) a BVH query is short but
 //! serial: the reciprocal's division, a node test, a sorted stack and the leaf tests, with
@@ -21,13 +25,14 @@
 //!
 //! With the range test before the division widened as the BVH's (`triangle::RANGE_WIDEN`), a
 //! hit agrees with the BVH's bit for bit, with one exception: the BVH tests a triangle only if
-//! the ray enters its box, so a spurious hit that rounding could produce for a ray starting
-//! within the test's error (~1e-7 of the vertices' magnitude) of a triangle's plane, outside its
-//! box, is found here and not there. Spawned rays start beyond that error
+//! the ray enters its leaf's box, and here if some lane enters its cluster's (other boxes), so
+//! a spurious hit that rounding could produce for a ray starting within the test's error (~1e-7
+//! of the vertices' magnitude) of a triangle's plane, outside its box, may be found by one and
+//! not the other. Spawned rays start beyond that error
 //! (`geometry::offset_ray_origin`); in the Cornell box's 2.1 million paths of
 //! `SPP=32 wave_ab 2n 2` none differs.
 
-use super::{bvh::Bvh, triangle, Hit};
+use super::{bvh, bvh::Bvh, triangle, Hit};
 use crate::math::Ray;
 use glam::{Vec2, Vec3};
 
@@ -52,10 +57,29 @@ pub const MIN_LANES: usize = 8;
 #[repr(C, align(64))]
 struct Tri([f32; 16]);
 
-/// The mesh in packet form: its valid triangles in their original order, with their indices.
+/// Triangles of one cluster (`Packets::clusters`): a range of `Packets::tris` and its box.
+#[derive(Clone, Copy)]
+struct Cluster {
+    lo: [f32; 3],
+    hi: [f32; 3],
+    start: u32,
+    end: u32,
+}
+
+/// Most triangles in a cluster.
+const CLUSTER: usize = 4;
+
+/// The mesh in packet form: its valid triangles grouped into clusters of up to `CLUSTER`
+/// nearby ones, `pos[j]` being `tris[j]`'s position among the mesh's valid triangles, whose
+/// indices are `ids`.
 pub struct Packets {
     tris: Vec<Tri>,
+    pos: Vec<i32>,
+    clusters: Vec<Cluster>,
     ids: Vec<u32>,
+    /// Whether the integrator sends its shadow rays here (`occluded_batch`) rather than to
+    /// the BVH one by one: always, but for A/B benchmarks (`Accel::set_packet_shadows`).
+    shadows: bool,
 }
 
 impl Packets {
@@ -66,17 +90,39 @@ impl Packets {
         if tris.is_empty() || tris.len() > PACKET_MAX || !has_avx512() {
             return None;
         }
-        let tris = tris
+        let mut order: Vec<usize> = (0..tris.len()).collect();
+        let mut ranges = Vec::new();
+        split(tris, &mut order, 0, &mut ranges);
+        let packed = order
             .iter()
-            .map(|t| {
+            .map(|&i| {
                 let mut a = [0.0f32; 16];
-                for (v, p) in t.iter().enumerate() {
+                for (v, p) in tris[i].iter().enumerate() {
                     a[3 * v..3 * v + 3].copy_from_slice(&p.to_array());
                 }
                 Tri(a)
             })
             .collect();
-        Some(Packets { tris, ids: valid.to_vec() })
+        let clusters = ranges
+            .iter()
+            .map(|&(start, end)| {
+                let (lo, hi) = order[start..end]
+                    .iter()
+                    .flat_map(|&i| tris[i])
+                    .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| (lo.min(p), hi.max(p)));
+                Cluster { lo: lo.to_array(), hi: hi.to_array(), start: start as u32, end: end as u32 }
+            })
+            .collect();
+        Some(Packets { tris: packed, pos: order.iter().map(|&i| i as i32).collect(), clusters, ids: valid.to_vec(), shadows: true })
+    }
+
+    /// Whether shadow rays go through `occluded_batch`.
+    pub fn shadows(&self) -> bool {
+        self.shadows
+    }
+
+    pub(super) fn set_shadows(&mut self, on: bool) {
+        self.shadows = on;
     }
 
     /// Closest hits with t in (0, tmax) of `rays` (at most `WIDTH`) into `out`; lanes the
@@ -115,6 +161,24 @@ impl Packets {
     }
 }
 
+/// Orders `order` (positions into `tris`) so that clusters of at most `CLUSTER` nearby
+/// triangles are contiguous, and appends each cluster's range (offset by `base`) to `out`: a
+/// median split of the centroids along their widest axis, recursively.
+fn split(tris: &[[Vec3; 3]], order: &mut [usize], base: usize, out: &mut Vec<(usize, usize)>) {
+    if order.len() <= CLUSTER {
+        out.push((base, base + order.len()));
+        return;
+    }
+    let centroid = |i: usize| tris[i][0] + tris[i][1] + tris[i][2];
+    let (lo, hi) = order.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &i| (lo.min(centroid(i)), hi.max(centroid(i))));
+    let axis = (hi - lo).max_position();
+    order.sort_by(|&a, &b| centroid(a)[axis].total_cmp(&centroid(b)[axis]).then(a.cmp(&b)));
+    let mid = order.len() / 2;
+    let (left, right) = order.split_at_mut(mid);
+    split(tris, left, base, out);
+    split(tris, right, base + mid, out);
+}
+
 /// Rays of the wavefront integrator's batch (`integrator::wave::LANES`), in its layout.
 pub const BATCH: usize = 32;
 
@@ -149,6 +213,26 @@ impl Packets {
         #[cfg(not(target_arch = "x86_64"))]
         {
             let _ = (bvh, org, dir, live, tmax, out);
+            unreachable!("Packets::new makes none without AVX-512");
+        }
+    }
+}
+
+impl Packets {
+    /// Which of the rays i with bit i of `live` set (origin `org[axis][i]`, direction
+    /// `dir[axis][i]`) are blocked in (0, `tmax[i]`): bit i of the result, as `Bvh::occluded`
+    /// answers. The live lanes go in packets as in `intersect_batch`; each lane stops at its
+    /// first hit and the packet when every lane has one. Rays of a packet smaller than
+    /// `MIN_LANES`, and lanes the vector test cannot decide, go to `bvh` one by one.
+    pub fn occluded_batch(&self, bvh: &Bvh, org: [&[f32; BATCH]; 3], dir: [&[f32; BATCH]; 3], tmax: &[f32; BATCH], live: u32) -> u32 {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: a `Packets` exists only where `has_avx512` found AVX-512 F.
+        unsafe {
+            self.occluded_batch_avx512(bvh, org, dir, tmax, live)
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let _ = (bvh, org, dir, tmax, live);
             unreachable!("Packets::new makes none without AVX-512");
         }
     }
@@ -233,7 +317,7 @@ impl Packets {
                     return;
                 }
                 let active = ((1u32 << count) - 1) as u16;
-                let k = self.kernel(o, d, active, _mm512_set1_ps(tmax));
+                let k = self.kernel::<false>(o, d, active, _mm512_set1_ps(tmax));
                 let decided = active & !k.redo;
                 let hit = decided & _mm512_cmpge_epi32_mask(k.id, _mm512_setzero_si512());
                 let prim = _mm512_mask_i32gather_epi32::<4>(_mm512_set1_epi32(-1), hit, k.id, self.ids.as_ptr() as *const i32);
@@ -261,6 +345,82 @@ impl Packets {
                 run(o1, d1, i1, counts[1], out);
             }
         }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Packets {
+    /// `occluded_batch`.
+    ///
+    /// # Safety
+    /// Only where the CPU has AVX-512 F.
+    #[target_feature(enable = "avx512f")]
+    unsafe fn occluded_batch_avx512(
+        &self,
+        bvh: &Bvh,
+        org: [&[f32; BATCH]; 3],
+        dir: [&[f32; BATCH]; 3],
+        tmax: &[f32; BATCH],
+        live: u32,
+    ) -> u32 {
+        use std::arch::x86_64::*;
+        let halves = [live as u16, (live >> 16) as u16];
+        let counts = halves.map(|m| m.count_ones());
+        let blocked = |l: usize| {
+            let o = Vec3::new(org[0][l], org[1][l], org[2][l]);
+            bvh.occluded(o, Vec3::new(dir[0][l], dir[1][l], dir[2][l]), tmax[l])
+        };
+        let mut occluded = 0u32;
+        // SAFETY (whole block): AVX-512 F is present (the caller's contract); the loads read
+        // sixteen floats of 32-float arrays at 0 or 16.
+        unsafe {
+            let iota = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+            // Half h's live lanes, packed to the bottom: origin, direction, tmax, lane numbers.
+            let half = |h: usize| {
+                let m = halves[h];
+                let ld = |a: &[f32; BATCH]| _mm512_maskz_compress_ps(m, _mm512_loadu_ps(a.as_ptr().add(16 * h)));
+                let idx = _mm512_maskz_compress_epi32(m, _mm512_add_epi32(iota, _mm512_set1_epi32(16 * h as i32)));
+                ([ld(org[0]), ld(org[1]), ld(org[2])], [ld(dir[0]), ld(dir[1]), ld(dir[2])], ld(tmax), idx)
+            };
+            let mut run = |o: [__m512; 3], d: [__m512; 3], t: __m512, idx: __m512i, count: u32| {
+                if count == 0 {
+                    return;
+                }
+                let mut lane = [0i32; 16];
+                _mm512_storeu_si512(lane.as_mut_ptr() as *mut _, idx);
+                if (count as usize) < MIN_LANES {
+                    for &l in &lane[..count as usize] {
+                        occluded |= (blocked(l as usize) as u32) << l;
+                    }
+                    return;
+                }
+                let active = ((1u32 << count) - 1) as u16;
+                let k = self.kernel::<true>(o, d, active, t);
+                let mut hit = active & _mm512_cmpge_epi32_mask(k.id, _mm512_setzero_si512());
+                while hit != 0 {
+                    occluded |= 1 << lane[hit.trailing_zeros() as usize];
+                    hit &= hit - 1;
+                }
+                let mut redo = k.redo & active;
+                while redo != 0 {
+                    let l = lane[redo.trailing_zeros() as usize];
+                    occluded |= (blocked(l as usize) as u32) << l;
+                    redo &= redo - 1;
+                }
+            };
+            let (o0, d0, t0, i0) = half(0);
+            let (o1, d1, t1, i1) = half(1);
+            if counts[0] + counts[1] <= 16 {
+                let place = (((1u32 << counts[1]) - 1) << counts[0]) as u16;
+                let o = [0, 1, 2].map(|a| _mm512_mask_expand_ps(o0[a], place, o1[a]));
+                let d = [0, 1, 2].map(|a| _mm512_mask_expand_ps(d0[a], place, d1[a]));
+                run(o, d, _mm512_mask_expand_ps(t0, place, t1), _mm512_mask_expand_epi32(i0, place, i1), counts[0] + counts[1]);
+            } else {
+                run(o0, d0, t0, i0, counts[0]);
+                run(o1, d1, t1, i1, counts[1]);
+            }
+        }
+        occluded
     }
 }
 
@@ -304,7 +464,7 @@ impl Packets {
             let o = [load(&oa[0]), load(&oa[1]), load(&oa[2])];
             let d = [load(&da[0]), load(&da[1]), load(&da[2])];
             let active = ((1u32 << lanes.len()) - 1) as u16;
-            let k = self.kernel(o, d, active, _mm512_loadu_ps(tmax.as_ptr()));
+            let k = self.kernel::<false>(o, d, active, _mm512_loadu_ps(tmax.as_ptr()));
             _mm512_storeu_ps(res.t.as_mut_ptr(), k.t);
             _mm512_storeu_ps(res.b1.as_mut_ptr(), k.b1);
             _mm512_storeu_ps(res.b2.as_mut_ptr(), k.b2);
@@ -314,13 +474,15 @@ impl Packets {
     }
 
     /// The vector test of the rays in the lanes of `active` (origins `o`, directions `d`, one
-    /// axis a register), lane i in (0, tmax[i]).
+    /// axis a register), lane i in (0, tmax[i]): its closest hit, or with `ANY` its first (a
+    /// lane stops at it, the test when every lane has one), whose triangle `id` is then all
+    /// the answer.
     ///
     /// # Safety
     /// Only where the CPU has AVX-512 F.
     #[target_feature(enable = "avx512f")]
     #[inline]
-    unsafe fn kernel(
+    unsafe fn kernel<const ANY: bool>(
         &self,
         o: [std::arch::x86_64::__m512; 3],
         d: [std::arch::x86_64::__m512; 3],
@@ -378,6 +540,16 @@ impl Packets {
             let iy = [at(0, kyv), at(1, kyv), at(2, kyv)];
             let iz = [at(0, kzv), at(1, kzv), at(2, kzv)];
             let inf = _mm512_set1_ps(f32::INFINITY);
+            // The BVH's widened reciprocals (`bvh::RayData`), for its box test on the clusters.
+            let min_dir = _mm512_set1_ps(bvh::MIN_DIR);
+            let clamped = |v: __m512| {
+                let tiny = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(abs(v), min_dir);
+                _mm512_mask_blend_ps(tiny, v, _mm512_or_ps(_mm512_and_ps(v, _mm512_castsi512_ps(sign)), min_dir))
+            };
+            let inv = [dx, dy, dz].map(|v| _mm512_div_ps(_mm512_set1_ps(1.0), clamped(v)));
+            let inv_lo = inv.map(|i| _mm512_mul_ps(i, _mm512_set1_ps(1.0 - bvh::SLAB_WIDEN)));
+            let inv_hi = inv.map(|i| _mm512_mul_ps(i, _mm512_set1_ps(1.0 + bvh::SLAB_WIDEN)));
+            let org = [ox0, oy0, oz0];
             let mut best_t = tmax;
             // `best_t · RANGE_WIDEN`, for the range test before the division.
             let widen = _mm512_set1_ps(triangle::RANGE_WIDEN);
@@ -385,57 +557,96 @@ impl Packets {
             let mut best_id = _mm512_set1_epi32(-1);
             let (mut best_det, mut best_v, mut best_w) = (zero, zero, zero);
             let mut redo: u16 = 0;
-            for (j, tri) in self.tris.iter().enumerate() {
-                let tv = _mm512_load_ps(tri.0.as_ptr());
-                // `triangle::intersect`'s sheared vertex: a[kx] − sx·a[kz], a[ky] − sy·a[kz],
-                // sz·a[kz], with a = p − origin.
-                let sheared = |v: usize| {
-                    let az = _mm512_sub_ps(_mm512_permutexvar_ps(iz[v], tv), oz);
-                    let x = _mm512_sub_ps(_mm512_sub_ps(_mm512_permutexvar_ps(ix[v], tv), ox), _mm512_mul_ps(sx, az));
-                    let y = _mm512_sub_ps(_mm512_sub_ps(_mm512_permutexvar_ps(iy[v], tv), oy), _mm512_mul_ps(sy, az));
-                    (x, y, _mm512_mul_ps(sz, az))
+            let mut occluded: u16 = 0;
+            'clusters: for c in &self.clusters {
+                // `bvh::node_test`'s box test of the segment (0, best_t), lane by lane: a
+                // cluster no lane enters holds no hit for any (as for the BVH, a hit is inside
+                // the box, which the test's widening keeps conservative).
+                let slab = |a: usize| {
+                    let (p0, p1) = (_mm512_sub_ps(_mm512_set1_ps(c.lo[a]), org[a]), _mm512_sub_ps(_mm512_set1_ps(c.hi[a]), org[a]));
+                    let near = _mm512_min_ps(_mm512_mul_ps(p0, inv_lo[a]), _mm512_mul_ps(p1, inv_lo[a]));
+                    let far = _mm512_max_ps(_mm512_mul_ps(p0, inv_hi[a]), _mm512_mul_ps(p1, inv_hi[a]));
+                    (near, far)
                 };
-                let (ax, ay, az) = sheared(0);
-                let (bx, by, bz) = sheared(1);
-                let (cx, cy, cz) = sheared(2);
-                let u = _mm512_sub_ps(_mm512_mul_ps(cx, by), _mm512_mul_ps(cy, bx));
-                let v = _mm512_sub_ps(_mm512_mul_ps(ax, cy), _mm512_mul_ps(ay, cx));
-                let w = _mm512_sub_ps(_mm512_mul_ps(bx, ay), _mm512_mul_ps(by, ax));
-                // The tests below are compares masked by the previous one's result, so that the
-                // lanes' masks stay in mask registers (ANDed as `u16`s, they travelled through
-                // general registers and back, a dozen instructions a triangle).
-                // Lanes with no edge function zero; the others are the BVH's.
-                let nz = _mm512_mask_cmp_ps_mask::<_CMP_NEQ_UQ>(active, u, zero);
-                let nz = _mm512_mask_cmp_ps_mask::<_CMP_NEQ_UQ>(nz, v, zero);
-                let nz = _mm512_mask_cmp_ps_mask::<_CMP_NEQ_UQ>(nz, w, zero);
-                redo |= active ^ nz;
-                // With no function zero, "some negative and some positive" is "the sign bits
-                // differ": (u ^ v) | (u ^ w) has its sign bit set (ternary-logic table 0x7E).
-                let (ui, vi, wi) = (_mm512_castps_si512(u), _mm512_castps_si512(v), _mm512_castps_si512(w));
-                let same = _mm512_mask_testn_epi32_mask(nz, _mm512_ternarylogic_epi32::<0x7E>(ui, vi, wi), sign);
-                let det = _mm512_add_ps(_mm512_add_ps(u, v), w);
-                let t_scaled = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(u, az), _mm512_mul_ps(v, bz)), _mm512_mul_ps(w, cz));
-                // ts = −t_scaled and d = −det where det < 0: flipping the sign bit.
-                let det_sign = _mm512_and_si512(_mm512_castps_si512(det), sign);
-                let ts = _mm512_castsi512_ps(_mm512_xor_si512(_mm512_castps_si512(t_scaled), det_sign));
-                let d = _mm512_castsi512_ps(_mm512_andnot_si512(sign, _mm512_castps_si512(det)));
-                let pass = _mm512_mask_cmp_ps_mask::<_CMP_GT_OQ>(same, d, zero);
-                let pass = _mm512_mask_cmp_ps_mask::<_CMP_LT_OQ>(pass, d, inf);
-                let pass = _mm512_mask_cmp_ps_mask::<_CMP_GT_OQ>(pass, ts, zero);
-                let pass = _mm512_mask_cmp_ps_mask::<_CMP_LT_OQ>(pass, ts, _mm512_mul_ps(best_tw, d));
-                // Most triangles are missed by every lane, which the tests without the
-                // division decide (a 512-bit division issues once per 16 cycles).
-                if pass != 0 {
-                    let t = _mm512_maskz_div_ps(pass, t_scaled, det);
-                    let hit = _mm512_mask_cmp_ps_mask::<_CMP_GT_OQ>(pass, t, zero);
-                    let hit = _mm512_mask_cmp_ps_mask::<_CMP_LT_OQ>(hit, t, best_t);
-                    best_t = _mm512_mask_mov_ps(best_t, hit, t);
-                    best_tw = _mm512_mask_mul_ps(best_tw, hit, t, widen);
-                    best_id = _mm512_mask_mov_epi32(best_id, hit, _mm512_set1_epi32(j as i32));
-                    best_det = _mm512_mask_mov_ps(best_det, hit, det);
-                    best_v = _mm512_mask_mov_ps(best_v, hit, v);
-                    best_w = _mm512_mask_mov_ps(best_w, hit, w);
+                let ((xn, xf), (yn, yf), (zn, zf)) = (slab(0), slab(1), slab(2));
+                let tn = _mm512_max_ps(_mm512_max_ps(xn, yn), _mm512_max_ps(zn, zero));
+                let tf = _mm512_min_ps(_mm512_min_ps(xf, yf), _mm512_min_ps(zf, best_t));
+                if _mm512_mask_cmp_ps_mask::<_CMP_LE_OQ>(active, tn, tf) == 0 {
+                    continue;
                 }
+                for j in c.start as usize..c.end as usize {
+                    // SAFETY: the clusters' ranges partition `tris`, and `pos` has its length.
+                    let tv = _mm512_load_ps(self.tris.get_unchecked(j).0.as_ptr());
+                    let pos = _mm512_set1_epi32(*self.pos.get_unchecked(j));
+                    // `triangle::intersect`'s sheared vertex: a[kx] − sx·a[kz], a[ky] − sy·a[kz],
+                    // sz·a[kz], with a = p − origin.
+                    let sheared = |v: usize| {
+                        let az = _mm512_sub_ps(_mm512_permutexvar_ps(iz[v], tv), oz);
+                        let x = _mm512_sub_ps(_mm512_sub_ps(_mm512_permutexvar_ps(ix[v], tv), ox), _mm512_mul_ps(sx, az));
+                        let y = _mm512_sub_ps(_mm512_sub_ps(_mm512_permutexvar_ps(iy[v], tv), oy), _mm512_mul_ps(sy, az));
+                        (x, y, _mm512_mul_ps(sz, az))
+                    };
+                    let (ax, ay, az) = sheared(0);
+                    let (bx, by, bz) = sheared(1);
+                    let (cx, cy, cz) = sheared(2);
+                    let u = _mm512_sub_ps(_mm512_mul_ps(cx, by), _mm512_mul_ps(cy, bx));
+                    let v = _mm512_sub_ps(_mm512_mul_ps(ax, cy), _mm512_mul_ps(ay, cx));
+                    let w = _mm512_sub_ps(_mm512_mul_ps(bx, ay), _mm512_mul_ps(by, ax));
+                    // The tests below are compares masked by the previous one's result, so that the
+                    // lanes' masks stay in mask registers (ANDed as `u16`s, they travelled through
+                    // general registers and back, a dozen instructions a triangle).
+                    // Lanes with no edge function zero; the others are the BVH's.
+                    let nz = _mm512_mask_cmp_ps_mask::<_CMP_NEQ_UQ>(active, u, zero);
+                    let nz = _mm512_mask_cmp_ps_mask::<_CMP_NEQ_UQ>(nz, v, zero);
+                    let nz = _mm512_mask_cmp_ps_mask::<_CMP_NEQ_UQ>(nz, w, zero);
+                    redo |= active ^ nz;
+                    // With no function zero, "some negative and some positive" is "the sign bits
+                    // differ": (u ^ v) | (u ^ w) has its sign bit set (ternary-logic table 0x7E).
+                    let (ui, vi, wi) = (_mm512_castps_si512(u), _mm512_castps_si512(v), _mm512_castps_si512(w));
+                    let same = _mm512_mask_testn_epi32_mask(nz, _mm512_ternarylogic_epi32::<0x7E>(ui, vi, wi), sign);
+                    let det = _mm512_add_ps(_mm512_add_ps(u, v), w);
+                    let t_scaled = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(u, az), _mm512_mul_ps(v, bz)), _mm512_mul_ps(w, cz));
+                    // ts = −t_scaled and d = −det where det < 0: flipping the sign bit.
+                    let det_sign = _mm512_and_si512(_mm512_castps_si512(det), sign);
+                    let ts = _mm512_castsi512_ps(_mm512_xor_si512(_mm512_castps_si512(t_scaled), det_sign));
+                    let d = _mm512_castsi512_ps(_mm512_andnot_si512(sign, _mm512_castps_si512(det)));
+                    let pass = _mm512_mask_cmp_ps_mask::<_CMP_GT_OQ>(same, d, zero);
+                    let pass = _mm512_mask_cmp_ps_mask::<_CMP_LT_OQ>(pass, d, inf);
+                    let pass = _mm512_mask_cmp_ps_mask::<_CMP_GT_OQ>(pass, ts, zero);
+                    let pass = _mm512_mask_cmp_ps_mask::<_CMP_LT_OQ>(pass, ts, _mm512_mul_ps(best_tw, d));
+                    // Most triangles are missed by every lane, which the tests without the
+                    // division decide (a 512-bit division issues once per 16 cycles).
+                    if pass != 0 {
+                        let t = _mm512_maskz_div_ps(pass, t_scaled, det);
+                        let ahead = _mm512_mask_cmp_ps_mask::<_CMP_GT_OQ>(pass, t, zero);
+                        let closer = _mm512_mask_cmp_ps_mask::<_CMP_LT_OQ>(ahead, t, best_t);
+                        if ANY {
+                            // As the BVH's any-hit query: a hit in (0, tmax) ends the lane.
+                            best_id = _mm512_mask_mov_epi32(best_id, closer, pos);
+                            occluded |= closer;
+                            active &= !closer;
+                            if active == 0 {
+                                break 'clusters;
+                            }
+                            continue;
+                        }
+                        // Closer, or as close with a lower index: the BVH's rule for ties, since
+                        // the clusters do not keep the index order. Nothing is as close as the
+                        // initial `tmax` with a lower index than no hit's −1.
+                        let tie = _mm512_mask_cmplt_epi32_mask(_mm512_mask_cmp_ps_mask::<_CMP_EQ_OQ>(ahead, t, best_t), pos, best_id);
+                        let hit = closer | tie;
+                        best_t = _mm512_mask_mov_ps(best_t, hit, t);
+                        best_tw = _mm512_mask_mul_ps(best_tw, hit, t, widen);
+                        best_id = _mm512_mask_mov_epi32(best_id, hit, pos);
+                        best_det = _mm512_mask_mov_ps(best_det, hit, det);
+                        best_v = _mm512_mask_mov_ps(best_v, hit, v);
+                        best_w = _mm512_mask_mov_ps(best_w, hit, w);
+                    }
+                }
+            }
+            if ANY {
+                // A lane with a hit is answered, whatever edge rounded to zero on its way.
+                return KernelOut { t: best_t, b1: zero, b2: zero, id: best_id, redo: redo & !occluded };
             }
             // The barycentrics as the scalar test computes them: v and w times 1/det.
             let inv = _mm512_div_ps(_mm512_set1_ps(1.0), best_det);
@@ -509,6 +720,84 @@ mod tests {
         assert!(hits > 500 && counts[0] > 5 && counts[1] > 5, "{hits} hits, {counts:?} batches of two packets / one");
     }
 
+    /// Segments between points of the mesh (shadow rays from one surface to another, ending
+    /// just short of it, as the integrator's) and random rays with random, infinite, zero,
+    /// negative and NaN `tmax`, in batches with every number of live lanes.
+    fn check_occluded(mesh: &Mesh, seed: u64) -> [usize; 2] {
+        let accel = Accel::build(mesh);
+        let Some(p) = accel.packets() else {
+            assert!(!has_avx512() || mesh.triangles.len() > PACKET_MAX, "a CPU with AVX-512 F has a packet query for this mesh");
+            return [0, 0];
+        };
+        let mut rng = Pcg32::new(seed, 7);
+        let on_mesh = |rng: &mut Pcg32| {
+            let t = mesh.triangles[rng.below(mesh.triangles.len() as u32) as usize].map(|v| mesh.positions[v as usize]);
+            let (u, v) = (rng.next_f32(), rng.next_f32());
+            let (u, v) = if u + v > 1.0 { (1.0 - u, 1.0 - v) } else { (u, v) };
+            (t[0] * (1.0 - u - v) + t[1] * u + t[2] * v, (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero())
+        };
+        let random = RayBatch::random_in_bounds(mesh, 200 * BATCH, seed);
+        let mut counts = [0usize; 2];
+        for k in 0..400 {
+            let mut rays = Vec::with_capacity(BATCH);
+            let mut tmax = [0.0f32; BATCH];
+            for (i, t) in tmax.iter_mut().enumerate() {
+                if k % 2 == 0 {
+                    let ((a, na), (b, _)) = (on_mesh(&mut rng), on_mesh(&mut rng));
+                    let o = a + na * (1e-3 * if rng.below(2) == 0 { 1.0 } else { -1.0 });
+                    let d = (b - o).normalize_or_zero();
+                    rays.push(Ray::new(o, d));
+                    *t = (b - o).length() * (1.0 - 1e-4);
+                } else {
+                    rays.push(random.ray((k / 2) * BATCH + i));
+                    *t = match rng.below(16) {
+                        0 => f32::INFINITY,
+                        1 => 0.0,
+                        2 => -1.0,
+                        3 => f32::NAN,
+                        _ => rng.next_f32() * 4.0,
+                    };
+                }
+            }
+            let axis = |f: fn(&Ray) -> Vec3, a: usize| -> [f32; BATCH] { std::array::from_fn(|i| f(&rays[i])[a]) };
+            let org = [0, 1, 2].map(|a| axis(|r| r.origin, a));
+            let dir = [0, 1, 2].map(|a| axis(|r| r.dir, a));
+            let keep = 1.0 - (k % 64) as f32 / 64.0;
+            let live = (0..BATCH).fold(0u32, |m, i| m | (((rng.next_f32() < keep) as u32) << i));
+            let got = p.occluded_batch(&accel.bvh, [&org[0], &org[1], &org[2]], [&dir[0], &dir[1], &dir[2]], &tmax, live);
+            for (i, r) in rays.iter().enumerate() {
+                let want = live & (1 << i) != 0 && accel.occluded(r, tmax[i]);
+                assert_eq!(got & (1 << i) != 0, want, "batch {k}, lane {i}: {r:?}, tmax {}", tmax[i]);
+                if live & (1 << i) != 0 {
+                    counts[want as usize] += 1;
+                }
+            }
+        }
+        counts
+    }
+
+    /// `occluded_batch` answers every live lane as `Bvh::occluded` does and no other.
+    #[test]
+    fn occluded_batch_equals_bvh_queries() {
+        let scene =
+            crate::scene::Scene::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/cornell-box/scene.toml")).unwrap();
+        let [free, blocked] = check_occluded(&scene.mesh, 8);
+        let mut rng = Pcg32::new(9, 0);
+        let mut soup = Mesh::default();
+        for _ in 0..40 {
+            let c = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0;
+            let p: Vec<Vec3> = (0..3).map(|_| c + Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5).collect();
+            soup.append(&p, &[], &[], &[[0, 1, 2]], 0);
+        }
+        let [free2, blocked2] = check_occluded(&soup, 10);
+        if has_avx512() {
+            assert!(
+                free > 1_500 && blocked > 1_500 && free2 > 1_500 && blocked2 > 1_500,
+                "{free}/{blocked}, soup {free2}/{blocked2} free/blocked"
+            );
+        }
+    }
+
     /// The packet query answers as the BVH does, bit for bit: on the Cornell box's camera rays
     /// (a quarter aimed at shared edges, where the f64 fallback decides) and random rays, and
     /// on a soup of random triangles. Fails only on a CPU with AVX-512 F; elsewhere there is
@@ -527,6 +816,21 @@ mod tests {
             soup.append(&p, &[], &[], &[[0, 1, 2]], 0);
         }
         hits += check(&soup, &RayBatch::random_in_bounds(&soup, 40_000, 4));
+        // Overlapping triangles in one plane: hits at exactly the same distance, which the
+        // clusters' order (not the index order) meets, so only the rule for ties keeps the
+        // BVH's answer.
+        let mut flat = Mesh::default();
+        for _ in 0..40 {
+            let p: Vec<Vec3> = (0..3).map(|_| Vec3::new(rng.next_f32() * 4.0, rng.next_f32() * 4.0, 1.0)).collect();
+            flat.append(&p, &[], &[], &[[0, 1, 2]], 0);
+        }
+        let mut down = RayBatch::default();
+        for _ in 0..40_000 {
+            let o = Vec3::new(rng.next_f32() * 4.0, rng.next_f32() * 4.0, 2.0 + rng.next_f32());
+            let target = Vec3::new(rng.next_f32() * 4.0, rng.next_f32() * 4.0, 1.0);
+            down.push(o, (target - o).normalize(), f32::INFINITY);
+        }
+        hits += check(&flat, &down);
         if has_avx512() {
             assert!(hits > 30_000, "only {hits} hits");
         }

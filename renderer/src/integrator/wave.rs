@@ -600,15 +600,30 @@ fn stage_shade(w: &mut Wave) {
 /// Stage 3, path by path: shadow rays, their contributions, Russian roulette.
 #[inline(always)]
 fn stage_shadow(scene: &Scene, w: &mut Wave, lanes: &mut Lanes, rr: bool) {
-    w.sh_ray[0] = Ray::new(w.sh_org.get(0), w.sh_dir.get(0));
+    // Where the mesh has a packet query, the shadow rays sixteen at a time.
+    let packets = scene.accel.packets().filter(|p| p.shadows());
+    let mut occluded = 0u32;
+    if let Some(p) = packets {
+        let live = (0..LANES).fold(0u32, |m, i| m | ((w.shadow[i] as u32) << i));
+        occluded = p.occluded_batch(
+            scene.accel.bvh(),
+            [&w.sh_org.x, &w.sh_org.y, &w.sh_org.z],
+            [&w.sh_dir.x, &w.sh_dir.y, &w.sh_dir.z],
+            &w.sh_tmax,
+            live,
+        );
+    } else {
+        w.sh_ray[0] = Ray::new(w.sh_org.get(0), w.sh_dir.get(0));
+    }
     for i in 0..LANES {
         // The next lane's shadow ray, one query ahead (see `Wave::ray`).
-        if i + 1 < LANES {
+        if packets.is_none() && i + 1 < LANES {
             w.sh_ray[i + 1] = Ray::new(w.sh_org.get(i + 1), w.sh_dir.get(i + 1));
         }
         if w.shadow[i] {
             lanes.rays[i] += 1;
-            if !scene.accel.occluded(&w.sh_ray[i], w.sh_tmax[i]) {
+            let blocked = if packets.is_some() { occluded & (1 << i) != 0 } else { scene.accel.occluded(&w.sh_ray[i], w.sh_tmax[i]) };
+            if !blocked {
                 w.l_d.set(i, w.l_d.get(i) + w.add_d.get(i));
                 w.l_s.set(i, w.l_s.get(i) + w.add_s.get(i));
             }
