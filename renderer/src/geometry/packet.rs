@@ -289,21 +289,10 @@ impl Packets {
     ) {
         use std::arch::x86_64::*;
         out.prim = [-1; BATCH];
-        let halves = [live as u16, (live >> 16) as u16];
-        let counts = halves.map(|m| m.count_ones());
-        // SAFETY (whole block): AVX-512 F is present (the caller's contract); the loads read
-        // sixteen floats of 32-float arrays at 0 or 16, gathers and scatters index lanes of
-        // 32-element arrays (0..32, from the lane numbers) or `self.ids` (a triangle
-        // position the kernel found, below `self.tris.len()`).
+        // SAFETY (whole block): AVX-512 F is present (the caller's contract); gathers and
+        // scatters index lanes of 32-element arrays (0..32, from the lane numbers) or
+        // `self.ids` (a triangle position the kernel found, below `self.tris.len()`).
         unsafe {
-            let iota = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-            // Half h's live lanes, packed to the bottom: origin, direction, lane numbers.
-            let half = |h: usize| {
-                let m = halves[h];
-                let ld = |a: &[f32; BATCH]| _mm512_maskz_compress_ps(m, _mm512_loadu_ps(a.as_ptr().add(16 * h)));
-                let idx = _mm512_maskz_compress_epi32(m, _mm512_add_epi32(iota, _mm512_set1_epi32(16 * h as i32)));
-                ([ld(org[0]), ld(org[1]), ld(org[2])], [ld(dir[0]), ld(dir[1]), ld(dir[2])], idx)
-            };
             let run = |o: [__m512; 3], d: [__m512; 3], idx: __m512i, count: u32, out: &mut BatchHits| {
                 if count == 0 {
                     return;
@@ -332,17 +321,9 @@ impl Packets {
                     single(bvh, org, dir, lane[j] as usize, tmax, out);
                 }
             };
-            let (o0, d0, i0) = half(0);
-            let (o1, d1, i1) = half(1);
-            if counts[0] + counts[1] <= 16 {
-                // One packet: the high half's lanes expanded into the places after the low's.
-                let place = (((1u32 << counts[1]) - 1) << counts[0]) as u16;
-                let o = [0, 1, 2].map(|a| _mm512_mask_expand_ps(o0[a], place, o1[a]));
-                let d = [0, 1, 2].map(|a| _mm512_mask_expand_ps(d0[a], place, d1[a]));
-                run(o, d, _mm512_mask_expand_epi32(i0, place, i1), counts[0] + counts[1], out);
-            } else {
-                run(o0, d0, i0, counts[0], out);
-                run(o1, d1, i1, counts[1], out);
+            for group in packets_of(live) {
+                let ([ox, oy, oz, dx, dy, dz], idx, count) = pack([org[0], org[1], org[2], dir[0], dir[1], dir[2]], group);
+                run([ox, oy, oz], [dx, dy, dz], idx, count, out);
             }
         }
     }
@@ -364,24 +345,13 @@ impl Packets {
         live: u32,
     ) -> u32 {
         use std::arch::x86_64::*;
-        let halves = [live as u16, (live >> 16) as u16];
-        let counts = halves.map(|m| m.count_ones());
         let blocked = |l: usize| {
             let o = Vec3::new(org[0][l], org[1][l], org[2][l]);
             bvh.occluded(o, Vec3::new(dir[0][l], dir[1][l], dir[2][l]), tmax[l])
         };
         let mut occluded = 0u32;
-        // SAFETY (whole block): AVX-512 F is present (the caller's contract); the loads read
-        // sixteen floats of 32-float arrays at 0 or 16.
+        // SAFETY (whole block): AVX-512 F is present (the caller's contract).
         unsafe {
-            let iota = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-            // Half h's live lanes, packed to the bottom: origin, direction, tmax, lane numbers.
-            let half = |h: usize| {
-                let m = halves[h];
-                let ld = |a: &[f32; BATCH]| _mm512_maskz_compress_ps(m, _mm512_loadu_ps(a.as_ptr().add(16 * h)));
-                let idx = _mm512_maskz_compress_epi32(m, _mm512_add_epi32(iota, _mm512_set1_epi32(16 * h as i32)));
-                ([ld(org[0]), ld(org[1]), ld(org[2])], [ld(dir[0]), ld(dir[1]), ld(dir[2])], ld(tmax), idx)
-            };
             let mut run = |o: [__m512; 3], d: [__m512; 3], t: __m512, idx: __m512i, count: u32| {
                 if count == 0 {
                     return;
@@ -408,19 +378,55 @@ impl Packets {
                     redo &= redo - 1;
                 }
             };
-            let (o0, d0, t0, i0) = half(0);
-            let (o1, d1, t1, i1) = half(1);
-            if counts[0] + counts[1] <= 16 {
-                let place = (((1u32 << counts[1]) - 1) << counts[0]) as u16;
-                let o = [0, 1, 2].map(|a| _mm512_mask_expand_ps(o0[a], place, o1[a]));
-                let d = [0, 1, 2].map(|a| _mm512_mask_expand_ps(d0[a], place, d1[a]));
-                run(o, d, _mm512_mask_expand_ps(t0, place, t1), _mm512_mask_expand_epi32(i0, place, i1), counts[0] + counts[1]);
-            } else {
-                run(o0, d0, t0, i0, counts[0]);
-                run(o1, d1, t1, i1, counts[1]);
+            for group in packets_of(live) {
+                let ([ox, oy, oz, dx, dy, dz, t], idx, count) = pack([org[0], org[1], org[2], dir[0], dir[1], dir[2], tmax], group);
+                run([ox, oy, oz], [dx, dy, dz], t, idx, count);
             }
         }
         occluded
+    }
+}
+
+/// A batch's live lanes (bit i: lane i) in packets of at most sixteen: one packet of them all
+/// where there are no more, else the low sixteen lanes' and the high sixteen's (0: no packet).
+#[cfg(target_arch = "x86_64")]
+fn packets_of(live: u32) -> [u32; 2] {
+    if live.count_ones() <= 16 {
+        [live, 0]
+    } else {
+        [live & 0xffff, live & 0xffff_0000]
+    }
+}
+
+/// The lanes of `group` (bit i: lane i of the batch, at most sixteen of them) packed to the
+/// bottom of sixteen-lane registers, the high half's lanes expanded into the places after the
+/// low half's: each array's values, the lane numbers, and how many.
+///
+/// # Safety
+/// Only where the CPU has AVX-512 F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[inline]
+unsafe fn pack<const N: usize>(
+    arrays: [&[f32; BATCH]; N],
+    group: u32,
+) -> ([std::arch::x86_64::__m512; N], std::arch::x86_64::__m512i, u32) {
+    use std::arch::x86_64::*;
+    let (m0, m1) = (group as u16, (group >> 16) as u16);
+    let (c0, c1) = (m0.count_ones(), m1.count_ones());
+    debug_assert!(c0 + c1 <= 16, "a packet holds sixteen lanes");
+    let place = (((1u32 << c1) - 1) << c0) as u16;
+    // SAFETY: AVX-512 F is present (the caller's contract); the loads read sixteen floats of
+    // 32-float arrays at 0 or 16.
+    unsafe {
+        let v = arrays.map(|a| {
+            let lo = _mm512_maskz_compress_ps(m0, _mm512_loadu_ps(a.as_ptr()));
+            _mm512_mask_expand_ps(lo, place, _mm512_maskz_compress_ps(m1, _mm512_loadu_ps(a.as_ptr().add(16))))
+        });
+        let iota = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+        let lo = _mm512_maskz_compress_epi32(m0, iota);
+        let idx = _mm512_mask_expand_epi32(lo, place, _mm512_maskz_compress_epi32(m1, _mm512_add_epi32(iota, _mm512_set1_epi32(16))));
+        (v, idx, c0 + c1)
     }
 }
 

@@ -407,7 +407,7 @@ fn stage_hit(scene: &Scene, w: &mut Wave, lanes: &mut Lanes, max_bounces: u32) {
     let packets = scene.accel.packets();
     let mut hits = BatchHits::default();
     if let Some(p) = packets {
-        let live = (0..LANES).fold(0u32, |m, i| m | ((w.alive[i] as u32) << i));
+        let live = lane_mask(&w.alive);
         p.intersect_batch(
             scene.accel.bvh(),
             [&w.org.x, &w.org.y, &w.org.z],
@@ -604,7 +604,7 @@ fn stage_shadow(scene: &Scene, w: &mut Wave, lanes: &mut Lanes, rr: bool) {
     let packets = scene.accel.packets().filter(|p| p.shadows());
     let mut occluded = 0u32;
     if let Some(p) = packets {
-        let live = (0..LANES).fold(0u32, |m, i| m | ((w.shadow[i] as u32) << i));
+        let live = lane_mask(&w.shadow);
         occluded = p.occluded_batch(
             scene.accel.bvh(),
             [&w.sh_org.x, &w.sh_org.y, &w.sh_org.z],
@@ -648,6 +648,12 @@ fn stage_shadow(scene: &Scene, w: &mut Wave, lanes: &mut Lanes, rr: bool) {
             w.beta_s.set(i, bs * k);
         }
     }
+}
+
+/// Bit i set where lane i's flag is.
+#[inline(always)]
+fn lane_mask(flags: &B) -> u32 {
+    (0..LANES).fold(0u32, |m, i| m | ((flags[i] as u32) << i))
 }
 
 #[inline(always)]
