@@ -35,6 +35,9 @@ enum Command {
     Reference(cli::reference::ReferenceArgs),
     /// Train a denoiser (g, p, both, guided, ablations) on a dataset folder (resumable).
     Train(cli::train::TrainArgs),
+    /// Train the ensembling network E (the gate) over frozen experts (g, p, and optionally OIDN):
+    /// their outputs on every shot are computed once and cached, then only E trains.
+    TrainGate(cli::train_gate::TrainGateArgs),
     /// Fit a trained model's guide gain (strengths × (N/2)^γ at N spp) on a dataset's
     /// validation shots and write the model with it; the tensors are unchanged.
     Calibrate(cli::calibrate::CalibrateArgs),
@@ -76,6 +79,7 @@ fn main() {
         Command::Dataset(a) => cli::dataset::run(a),
         Command::Reference(a) => cli::reference::run(a),
         Command::Train(a) => cli::train::run(a),
+        Command::TrainGate(a) => cli::train_gate::run(a),
         Command::Calibrate(a) => cli::calibrate::run(a),
         Command::Checkpoint(a) => cli::checkpoint::run(a),
         Command::Quantize(a) => cli::quantize::run(a),

@@ -15,7 +15,8 @@
 //! - [`kpcn`]: the KPCN backbone, the columns' input channels, the diffuse/specular recombination.
 //! - [`mskp`]: the multi-scale kernel-predicting U-Net backbone.
 //! - [`pathnet`]: the path-manifold module producing the P-buffer.
-//! - [`ensemble`]: network E and the per-pixel blend of the two denoisers.
+//! - [`ensemble`]: network E and the per-pixel blend of the two denoisers (inside the jointly trained model).
+//! - [`gate`]: E over finished denoisers (g, p, OIDN), trained on their cached outputs.
 //! - [`model`]: the network sizes (presets) of the whole framework.
 //! - [`preprocess`]: network inputs from a rendered frame, targets from a reference (§2, §4.1).
 //! - [`method`]: the compared methods (G, P, both, guided) as one model type.
@@ -34,6 +35,7 @@ pub mod names;
 
 pub mod column;
 pub mod ensemble;
+pub mod gate;
 pub mod infer;
 pub mod kernel;
 pub mod kpcn;
