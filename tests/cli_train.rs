@@ -264,8 +264,9 @@ fn backend_tch() {
     }
 }
 
-/// `pixguide calibrate` on a one-shot dataset: the shipped g (preset `edge-noise`) gets the best
-/// of the tried exponents written into its config, with the same tensors and a provenance note;
+/// `pixguide calibrate` on a one-shot dataset: the shipped both (preset `edge-noise`, an f16 file,
+/// which calibrate writes back as it read it) gets the best of the tried exponents written into
+/// its config, with the same tensors and a provenance note;
 /// a model without guides (a two-step `default` g trained here) and a negative exponent are
 /// refused.
 #[test]
@@ -275,7 +276,7 @@ fn calibrate_writes_the_kept_exponent_and_nothing_else() {
     let data = base.join("data");
     let d = data.to_str().unwrap();
     cornell_dataset(d, 1);
-    let input = "denoiser/weights/g-default.safetensors";
+    let input = "denoiser/weights/both-default.safetensors";
     let out = base.join("g.safetensors");
     let stdout =
         pixguide(&["calibrate", "--data", d, "--weights", input, "--exponents", "0,1", "--patch", "24", "-o", out.to_str().unwrap()]);
@@ -294,11 +295,27 @@ fn calibrate_writes_the_kept_exponent_and_nothing_else() {
     assert!(provenance.contains(&format!("guide_gain_exponent 0 -> {kept}")), "{provenance}");
     let plain = base.join("plain-g.safetensors");
     let plain = plain.to_str().unwrap();
-    pixguide(&["train", "--data", d, "--method", "g", "--patch", "24", "--batch", "1", "--branch-steps", "2", "--finetune-steps", "0", "--quiet", "-o", plain]);
-    for (weights, exps, why) in [
-        (plain, "--exponents=0,1", "no edge-stopping guides"),
-        (input, "--exponents=-1", "finite values in [0, 4]"),
-    ] {
+    pixguide(&[
+        "train",
+        "--data",
+        d,
+        "--method",
+        "g",
+        "--patch",
+        "24",
+        "--batch",
+        "1",
+        "--branch-steps",
+        "2",
+        "--finetune-steps",
+        "0",
+        "--quiet",
+        "-o",
+        plain,
+    ]);
+    for (weights, exps, why) in
+        [(plain, "--exponents=0,1", "no edge-stopping guides"), (input, "--exponents=-1", "finite values in [0, 4]")]
+    {
         let o = Command::new(env!("CARGO_BIN_EXE_pixguide"))
             .args([
                 "calibrate",

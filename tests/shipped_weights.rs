@@ -106,7 +106,7 @@ fn shipped_models_carry_their_edge_stopping_guides() {
 /// median over pixels of the denoised / reference luminance must stay above 0.75 (2 spp) and
 /// 0.80 (4 spp). A one-sided colour test, tried earlier, gave 0.54 at 2 spp; the shipped g and
 /// guided give 0.78 / 0.77 at 2 spp and 0.82 at 4 (the noisy render: 0.98). The bars sit between,
-/// so a model that darkens sparse images again fails (docs/denoiser.md, "Edge-stopping guides").
+/// so a model that darkens sparse images again fails (docs/denoiser.md, "The models in one paragraph each").
 #[test]
 fn shipped_edge_noise_models_keep_a_sparse_image_bright() {
     let lum = |c: &[f32], i: usize| 0.2126 * c[3 * i] + 0.7152 * c[3 * i + 1] + 0.0722 * c[3 * i + 2];

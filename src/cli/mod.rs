@@ -13,6 +13,8 @@ pub mod progress;
 pub mod quantize;
 pub mod reference;
 pub mod render;
+pub mod shared;
 pub mod sky;
 pub mod train;
+pub mod train_log;
 pub mod val_baselines;
