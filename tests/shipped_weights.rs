@@ -61,11 +61,11 @@ fn errors(stem: &str, method: Method) -> ((f64, f64), (f64, f64)) {
 
 /// The bars: 1−SSIM at least SSIM_FACTOR× and relMSE at least REL_MSE_FACTOR× below the noisy
 /// render's. Measured on the shipped weights (`cargo test --release --test shipped_weights --
-/// --nocapture`): 1−SSIM 5.1× (g), 5.8× (guided), 5.7× (guided-half) lower; relMSE 1.69×, 2.14×,
-/// 2.14× lower. The render is seeded, so the numbers are deterministic; the bars sit ~20–30 %
-/// under the weakest model so that a retrained model of the same quality passes, while a
-/// broken model, preprocessing or inference fails at once (a pass-through scores 1×). Raise
-/// them when better-trained weights land.
+/// --nocapture`): 1−SSIM 13.4× (g), 13.4× (guided), 12.2× (guided-half) lower; relMSE 15.4×,
+/// 15.4×, 13.3× lower. (The bars were set at 5.1–5.8× and 1.7–2.1× for the KPCN models shipped
+/// before; they stay low so that a retrained model of lesser size passes, while a broken model,
+/// preprocessing or inference fails at once: a pass-through scores 1×.) The render is seeded, so
+/// the numbers are deterministic.
 const SSIM_FACTOR: f64 = 4.0;
 const REL_MSE_FACTOR: f64 = 1.4;
 
@@ -105,8 +105,9 @@ fn shipped_models_carry_their_edge_stopping_guides() {
 /// veach-ajar at 2 and 4 spp: most pixels saw no light in any sample (83 % at 2 spp). The
 /// median over pixels of the denoised / reference luminance must stay above 0.75 (2 spp) and
 /// 0.80 (4 spp). A one-sided colour test, tried earlier, gave 0.54 at 2 spp; the shipped g and
-/// guided give 0.78 / 0.77 at 2 spp and 0.82 at 4 (the noisy render: 0.98). The bars sit between,
-/// so a model that darkens sparse images again fails (docs/denoiser.md, "The models in one paragraph each").
+/// guided give 0.85 at 2 spp and 0.86 at 4 (`cargo test --release --test shipped_weights --
+/// --nocapture`; the noisy render: 0.98). A model that darkens sparse images again fails
+/// (docs/denoiser.md, "The models in one paragraph each").
 #[test]
 fn shipped_edge_noise_models_keep_a_sparse_image_bright() {
     let lum = |c: &[f32], i: usize| 0.2126 * c[3 * i] + 0.7152 * c[3 * i + 1] + 0.0722 * c[3 * i + 2];
