@@ -62,8 +62,8 @@ fn errors(stem: &str, method: Method) -> ((f64, f64), (f64, f64)) {
 /// The bars: 1−SSIM at least SSIM_FACTOR× and relMSE at least REL_MSE_FACTOR× below the noisy
 /// render's. Measured on the shipped weights (`cargo test --release --test shipped_weights --
 /// --nocapture`): 1−SSIM 13.4× (g), 13.4× (guided), 12.2× (guided-half) lower; relMSE 15.4×,
-/// 15.4×, 13.3× lower. (The bars were set at 5.1–5.8× and 1.7–2.1× for the KPCN models shipped
-/// before; they stay low so that a retrained model of lesser size passes, while a broken model,
+/// 15.4×, 13.3× lower. (The bars were set when earlier weights measured 5.1–5.8× and 1.7–2.1×;
+/// they stay low so that a retrained model of lesser size passes, while a broken model,
 /// preprocessing or inference fails at once: a pass-through scores 1×.) The render is seeded, so
 /// the numbers are deterministic.
 const SSIM_FACTOR: f64 = 4.0;
