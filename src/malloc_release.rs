@@ -3,7 +3,7 @@
 //! scratch is several GiB) and after each validation pass.
 //!
 //! It matters with jemalloc preloaded and its decay turned off (`tools/campaign.sh`,
-//! docs/training.md "Memory allocator"): that configuration makes a p training step up to twice
+//! docs/training.md "Memory"): that configuration makes a p training step up to twice
 //! as fast as glibc, whose allocations over 32 MiB are fresh mappings faulted in page by page,
 //! but it never returns anything by itself, and the campaign's two runs grew to 24 GB. jemalloc
 //! is found at run time (`mallctl` in the process), so the binary needs no jemalloc of its own;

@@ -264,17 +264,19 @@ fn backend_tch() {
     }
 }
 
-/// `pixguide calibrate` on a validation-only dataset (`dataset --shots 0`): the shipped
-/// edge-noise g gets the best of the tried exponents written into its config, with the same
-/// tensors and a provenance note; a model without guides and a negative exponent are refused.
+/// `pixguide calibrate` on a one-shot dataset: the shipped both (preset `edge-noise`, an f16 file,
+/// which calibrate writes back as it read it) gets the best of the tried exponents written into
+/// its config, with the same tensors and a provenance note;
+/// a model without guides (a two-step `default` g trained here) and a negative exponent are
+/// refused.
 #[test]
 fn calibrate_writes_the_kept_exponent_and_nothing_else() {
     let base = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("calibrate");
     std::fs::remove_dir_all(&base).ok();
     let data = base.join("data");
     let d = data.to_str().unwrap();
-    cornell_dataset(d, 0);
-    let input = "denoiser/weights/edge-noise/g-default.safetensors";
+    cornell_dataset(d, 1);
+    let input = "denoiser/weights/both-default.safetensors";
     let out = base.join("g.safetensors");
     let stdout =
         pixguide(&["calibrate", "--data", d, "--weights", input, "--exponents", "0,1", "--patch", "24", "-o", out.to_str().unwrap()]);
@@ -291,10 +293,29 @@ fn calibrate_writes_the_kept_exponent_and_nothing_else() {
     assert_eq!(config["mskp"]["guide_gain_exponent"].as_f64(), Some(kept));
     let provenance = meta.to_string();
     assert!(provenance.contains(&format!("guide_gain_exponent 0 -> {kept}")), "{provenance}");
-    for (weights, exps, why) in [
-        ("denoiser/weights/swap/g-default.safetensors", "--exponents=0,1", "no edge-stopping guides"),
-        (input, "--exponents=-1", "finite values in [0, 4]"),
-    ] {
+    let plain = base.join("plain-g.safetensors");
+    let plain = plain.to_str().unwrap();
+    pixguide(&[
+        "train",
+        "--data",
+        d,
+        "--method",
+        "g",
+        "--patch",
+        "24",
+        "--batch",
+        "1",
+        "--branch-steps",
+        "2",
+        "--finetune-steps",
+        "0",
+        "--quiet",
+        "-o",
+        plain,
+    ]);
+    for (weights, exps, why) in
+        [(plain, "--exponents=0,1", "no edge-stopping guides"), (input, "--exponents=-1", "finite values in [0, 4]")]
+    {
         let o = Command::new(env!("CARGO_BIN_EXE_pixguide"))
             .args([
                 "calibrate",

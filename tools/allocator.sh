@@ -1,5 +1,5 @@
 # The allocator of the training scripts (sourced by tools/campaign.sh and tools/train_half.sh;
-# docs/training.md, "Memory allocator"). glibc maps every allocation over 32 MiB afresh and
+# docs/training.md, "Memory"). glibc maps every allocation over 32 MiB afresh and
 # faults it in page by page: half of a p step went to the kernel. jemalloc with its decay off
 # keeps those pages, and `pixguide train` hands them back every 30 s and after each validation,
 # which keeps each process at 4-8 GB: p steps 1.6x, both 1.3x faster than on glibc with huge

@@ -2,13 +2,13 @@
 # Equal-time comparison of the two column backbones (issue: "decide by measurement"): the KPCN
 # of the `kpcn` preset against the multi-scale kernel-predicting U-Net of `default`, for one
 # method, trained side by side on one thread each so that both see the same machine load.
-# Each runs at its own highest stable peak rate (docs/training.md, "Learning rate") with the
+# Each runs at its own highest stable peak rate (docs/journal/training.md, "Learning rate") with the
 # warm-up + cosine shape, no finetune stage, and validates about once a minute; the
 # validation events carry wall time, and `pixguide plot-training` draws the curves.
 #
 #   [VALS=16] tools/backbone_race.sh METHOD DATA OUT MINUTES KPCN_STEPS MSKP_STEPS
-#   e.g. tools/backbone_race.sh g /work/data/train-set /work/data/race 21 1600 2600
-#        VALS=6 tools/backbone_race.sh p /work/data/train-set /work/data/race 21 320 1000
+#   e.g. tools/backbone_race.sh g data/train-set runs/race 21 1600 2600
+#        VALS=6 tools/backbone_race.sh p data/train-set runs/race 21 320 1000
 #
 # VALS validations per run: a P-buffer model's validation (19 shots at up to 32 spp) takes about
 # a minute on one thread, so p runs validate less often than g runs.

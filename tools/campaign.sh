@@ -1,19 +1,19 @@
 #!/usr/bin/env bash
-# The long training campaign of issue 12, run a session at a time (docs/training.md, "The
-# campaign"). Each model is one run with a fixed plan of steps (which fixes its learning-rate
-# curve), paused when the session's time is up and resumed in the next session, on this
-# machine from its local checkpoint or on another from the packed one committed in
-# denoiser/weights/campaign/.
+# The long training campaign that made the shipped p, both and ablations, run a sitting at a
+# time (docs/journal/training.md, "The campaign"). Each model is one run with a fixed plan of
+# steps (which fixes its learning-rate curve), paused when the sitting's time is up and resumed
+# in the next, on this machine from its local checkpoint or on another from the packed one
+# kept in KEEP.
 #
-#   tools/campaign.sh DATA RUNS MINUTES   # e.g. tools/campaign.sh /work/data/campaign /work/runs/campaign 150
+#   tools/campaign.sh DATA RUNS MINUTES   # e.g. tools/campaign.sh data/campaign runs/campaign 150
 #
 # Two lanes, one thread each, so both cores work all session:
 #   lane 1: g, then both (which needs nothing from g), then Fix-N-Train and Full-N-Full;
 #   lane 2: p, then guided (from the finished g and p: it waits for g if p ends first), then
 #           radiance-only. The ablations wait for guided, whose step rate plans them.
 # An ablation starts only if its whole plan fits in the session's remaining time at the step
-# rate its parent run measured, so it never needs a packed checkpoint (issue 12's 50 MB budget,
-# docs/training.md). At the end of the session every unfinished run is packed (`pixguide
+# rate its parent run measured, so it never needs a packed checkpoint. At the end of the
+# session every unfinished run is packed (`pixguide
 # checkpoint pack`) into denoiser/weights/campaign/<model>.ckpt and every finished one's
 # weights and log are copied there; commit that folder.
 #

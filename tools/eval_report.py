@@ -3,7 +3,7 @@
 
 usage: tools/eval_report.py CACHE.jsonl [METHOD,...] [--normalised]
 
-Default report (issue 12's floors): each method's mean relMSE over the test scenes at every
+Default report: each method's mean relMSE over the test scenes at every
 spp, with its ratio to OIDN's where OIDN was measured; the paper's Table 2 measure (each
 scene's relMSE divided by its 2-spp noisy relMSE, averaged over scenes and 2-64 spp) and how
 far guided is below both-buffers on it; and every (scene, spp) where a learned method is worse

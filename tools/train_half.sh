@@ -1,5 +1,5 @@
 #!/bin/bash
-# The half-size comparison models of issue 12: the shipped `edge-noise` U-Net columns at half
+# The half-size comparison models: the shipped `edge-noise` U-Net columns at half
 # the channels of every level (`--widths 12,16,24,32,40` against 24,32,48,64,80), trained on the
 # campaign's dataset with the campaign's losses and rates (tools/campaign.sh) for fewer steps:
 #   g       3000 steps at 1e-3 (L1 + relative L2, relative to the input), then a tone-mapped
@@ -12,7 +12,7 @@
 # lanes' threads. Deterministic from the seed whatever THREADS is; rerunning resumes from the
 # checkpoints. Each run's output goes to OUT/<model>.out.
 #
-#   tools/train_half.sh DATA OUT     # e.g. tools/train_half.sh /work/data/campaign /work/runs/half
+#   tools/train_half.sh DATA OUT     # e.g. tools/train_half.sh data/campaign runs/half
 #
 # Environment: PIXGUIDE (the binary, a `--features tch` build for BACKEND=tch)
 # [target/release/pixguide], BACKEND [tch], THREADS [1] (per lane), JEMALLOC [all; none for glibc].

@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
-# Trains one set of g, p and guided within the 90-minute budget of issue 16, the way the
-# shipped set was trained (docs/training.md, "Training the shipped set"): g and p side by side
+# Trains one set of g, p and guided within a 90-minute budget, the way the
+# 2026-11-27 morning set was trained (docs/journal/training.md): g and p side by side
 # on one thread each, then guided from them on two threads. Every run is resumable
 # (`--resume`): rerunning this script continues where a killed run stopped.
 #
-#   tools/train_set.sh DATA OUT            # e.g. tools/train_set.sh /work/data/train-set /work/runs/set
+#   tools/train_set.sh DATA OUT            # e.g. tools/train_set.sh data/train-set runs/set
 #
 # Environment (defaults in brackets):
 #   PIXGUIDE   the binary [target/release/pixguide]; a `--features tch` build for BACKEND=tch
@@ -20,7 +20,7 @@ bin=${PIXGUIDE:-target/release/pixguide}
 backend=${BACKEND:-tch}
 preset=${PRESET:-edge-noise}
 # The loss of g, both and the joint stage: each patch's L1 plus a relative L2 term, divided by
-# its input's error (docs/denoiser.md, "L1 plus a relative L2 term"); p keeps the relative L1,
+# its input's error (docs/journal/denoiser.md, "L1 plus a relative L2 term"); p keeps the relative L1,
 # on which it is better at 32-64 spp. The joint stage moves the pretrained columns at 1e-5 (the
 # preset's 5e-5 made guided worse than both its columns on a caustic scene; docs/denoiser.md).
 inside=(--loss-scale relative-to-input --rel-l2-weight 1 --rel-l2-inside)

@@ -1,6 +1,6 @@
 //! Rewrites a weight file with another edge-stopping variant in its configuration, the tensors
 //! unchanged, and says so in its provenance notes. For inference-only changes of a guide's test
-//! that leave the networks' parameters valid (docs/denoiser.md, "Doubting black diffuse pixels").
+//! that leave the networks' parameters valid (docs/journal/denoiser.md, "Doubting black diffuse pixels").
 //!
 //! `cargo run --release -p denoiser --example set_edge_stopping -- IN OUT VARIANT "why"`
 //! (VARIANT as the config spells it, e.g. `FeaturesAndFadingNoisyColourDoubtingBlack`).

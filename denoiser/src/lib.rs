@@ -50,6 +50,7 @@ pub mod pathnet;
 pub mod preprocess;
 pub mod quantize;
 pub mod rng;
+pub(crate) mod tensor_file;
 pub mod train;
 pub mod weights;
 

@@ -56,6 +56,36 @@ impl Method {
 
 crate::names::named!(Method, "method");
 
+/// The ablations of Seed Table 2 (for the guided method): how a guided model was trained, and
+/// so part of its weight file's name (`weights::file_stem`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Ablation {
+    /// Everything from scratch, jointly.
+    FullNFull,
+    /// Pretrained D_G, D_P and PathNets frozen; only E trains.
+    FixNTrain,
+    /// E sees only sg(I_G), sg(I_P).
+    RadianceOnly,
+}
+
+impl Ablation {
+    pub const ALL: [Ablation; 3] = [Ablation::FullNFull, Ablation::FixNTrain, Ablation::RadianceOnly];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Ablation::FullNFull => "full-n-full",
+            Ablation::FixNTrain => "fix-n-train",
+            Ablation::RadianceOnly => "radiance-only",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Self> {
+        s.parse().ok()
+    }
+}
+
+crate::names::named!(Ablation, "ablation");
+
 /// The networks of one branch (diffuse or specular); unused ones are `None`.
 #[derive(Module, Debug)]
 pub struct BranchNets {

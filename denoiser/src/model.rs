@@ -23,7 +23,7 @@ pub struct DenoiserConfig {
     #[config(default = "None")]
     pub mskp: Option<MsKpConfig>,
     /// D_P's U-Net level widths where they differ from `mskp.widths` (as many levels): a guided
-    /// model can then join a D_G trained wider than its D_P (docs/denoiser.md, "Wider columns").
+    /// model can then join a D_G trained wider than its D_P (docs/journal/denoiser.md, "Wider columns").
     /// The both-buffers column keeps `mskp.widths`.
     #[config(default = "None")]
     pub p_widths: Option<Vec<usize>>,
@@ -93,7 +93,7 @@ impl DenoiserConfig {
     /// `default` with kernels at all five U-Net levels composited by Vogels et al.'s low-band
     /// swap ([`ScaleCompositor::LowPassSwap`]). Opt-in, not the default: that compositor is the
     /// subject of US patent 10,699,382 (docs/method.md §12), which the default's convex blend
-    /// was chosen to stay clear of; measured in docs/denoiser.md ("The swap models").
+    /// was chosen to stay clear of; measured in docs/journal/denoiser.md ("The swap models").
     pub fn swap() -> Self {
         let mut c = Self::cpu_default();
         c.mskp = c.mskp.map(|m| m.with_kernel_scales(5).with_compositor(ScaleCompositor::LowPassSwap));
@@ -123,7 +123,7 @@ impl DenoiserConfig {
     }
 
     /// Peak learning rate of the pretraining stage: the highest rate measured stable for the
-    /// backbone (docs/training.md, "Learning rate"). The U-Net trains at 1e-3 (3e-3 diverged);
+    /// backbone (docs/journal/training.md, "Learning rate"). The U-Net trains at 1e-3 (3e-3 diverged);
     /// the KPCN stays at the paper's 1e-4 (1e-3 diverged, 3e-4 oscillated in the race).
     pub fn peak_lr(&self) -> f64 {
         if self.mskp.is_some() {
@@ -419,7 +419,7 @@ mod tests {
         let (b, s) = (default.macs_per_pixel(8) as f64, default_half.macs_per_pixel(8) as f64);
         assert!(s < b / 2.0 && s > b / 4.5, "{s} vs {b}");
         assert!("huge".parse::<Preset>().is_err());
-        // The multi-scale preset's targets (issue #16): ≤ 0.5 M MAC per pixel for the whole
+        // The multi-scale preset's targets: ≤ 0.5 M MAC per pixel for the whole
         // guided model at 8 spp, and a column seeing ≥ 64 px.
         let ms = DenoiserConfig::cpu_default();
         assert!(ms.macs_per_pixel(8) <= 500_000, "{}", ms.macs_per_pixel(8));
@@ -458,7 +458,7 @@ mod tests {
 
     /// The `edge-noise` preset's colour guides doubt a black centre only in the diffuse branch
     /// of a model built from it: a black specular pixel is mostly a surface without a specular
-    /// lobe (docs/denoiser.md, "Doubting black diffuse pixels").
+    /// lobe (docs/journal/denoiser.md, "Doubting black diffuse pixels").
     #[test]
     fn edge_noise_preset_doubts_black_only_in_the_diffuse_branch() {
         let model = MethodModel::init(&DenoiserConfig::edge_noise(), Method::Guided, &cpu_device());

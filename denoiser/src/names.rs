@@ -7,7 +7,7 @@
 //!
 //! [`Method`]: crate::method::Method
 //! [`Preset`]: crate::model::Preset
-//! [`Ablation`]: crate::train::schedule::Ablation
+//! [`Ablation`]: crate::method::Ablation
 //! [`Backend`]: crate::Backend
 //! [`FinetuneLoss`]: crate::train::schedule::FinetuneLoss
 //! [`LossScale`]: crate::loss::LossScale

@@ -2,19 +2,19 @@
 //! stored as signed bytes with one f32 scale per row (per output channel of a convolution), the
 //! small tensors (biases, weight-norm gains, E's and the guides' few numbers) stay as they were.
 //! That halves an f16 file, and so halves what each shipped model adds to the repository (issue
-//! 12's 50 MB budget, docs/training.md "Repository budget"). The rounding is at most half a
+//! 12's 50 MB budget, docs/journal/training.md "Repository budget"). The rounding is at most half a
 //! step of 1/127 of a row's largest magnitude; what it does to the denoised images is measured
-//! in docs/denoiser.md ("8-bit weight files").
+//! in docs/journal/denoiser.md ("8-bit weight files").
 //!
 //! The file stays a safetensors file: the kernel `name` holds I8 values of its shape and
 //! `name.int8_scale` the F32 scales of its rows; the metadata key [`KEY`] says so. Loading
-//! ([`crate::weights::load`]) dequantises to f32 before the model sees the tensors.
+//! (`weights::load`, one layer up) dequantises to f32 before the model sees the tensors.
 
 use std::collections::HashMap;
 
 use safetensors::{Dtype, SafeTensors};
 
-use crate::weights::{serialize_tensors as serialize, tensor_floats as floats, OwnedTensor};
+use crate::tensor_file::{serialize_tensors as serialize, tensor_floats as floats, OwnedTensor};
 
 /// Metadata key naming the storage; absent for f16/f32 files.
 pub const KEY: &str = "pixguide.storage";

@@ -59,7 +59,7 @@ pub struct Provenance {
 /// The stem of a model's weight file, `<ablation or method>-<preset>` (`guided-default`,
 /// `fix-n-train-default`, `guided-half`): what `pixguide train --all` writes and `pixguide eval`
 /// looks for.
-pub fn file_stem(method: Method, ablation: Option<crate::train::schedule::Ablation>, preset: crate::model::Preset) -> String {
+pub fn file_stem(method: Method, ablation: Option<crate::method::Ablation>, preset: crate::model::Preset) -> String {
     format!("{}-{preset}", ablation.map_or(method.name(), |a| a.name()))
 }
 
@@ -138,29 +138,6 @@ pub fn save(path: &Path, model: &MethodModel, config: &DenoiserConfig, preset: &
         std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o644)).ok();
     }
     Ok(())
-}
-
-/// A tensor read out of (or to be written into) a safetensors file: name, dtype, shape, bytes.
-pub(crate) type OwnedTensor = (String, safetensors::Dtype, Vec<usize>, Vec<u8>);
-
-/// The values of an F32 or F16 tensor as f32 (an error naming the tensor for other dtypes).
-pub(crate) fn tensor_floats(name: &str, dtype: safetensors::Dtype, data: &[u8]) -> Result<Vec<f32>, String> {
-    match dtype {
-        safetensors::Dtype::F32 => Ok(data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()),
-        safetensors::Dtype::F16 => Ok(data.chunks_exact(2).map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32()).collect()),
-        d => Err(format!("tensor `{name}` is {d:?}, expected f32 or f16")),
-    }
-}
-
-/// A safetensors file of `tensors` (written in name order, so the bytes do not depend on the
-/// order they came in) with `meta`.
-pub(crate) fn serialize_tensors(mut tensors: Vec<OwnedTensor>, meta: HashMap<String, String>) -> Result<Vec<u8>, String> {
-    tensors.sort_by(|a, b| a.0.cmp(&b.0));
-    let views = tensors
-        .iter()
-        .map(|(n, dt, s, b)| Ok((n.clone(), safetensors::tensor::TensorView::new(*dt, s.clone(), b).map_err(|e| format!("`{n}`: {e}"))?)))
-        .collect::<Result<Vec<_>, String>>()?;
-    safetensors::serialize(views, Some(meta)).map_err(|e| e.to_string())
 }
 
 /// Reads only the metadata of a weight file (cheap: the header).
@@ -437,7 +414,7 @@ mod tests {
             let q = path.with_extension("int8.safetensors");
             std::fs::write(&q, &int8).unwrap();
             // The tiny models' header and small tensors weigh more than a real model's, whose
-            // files come to about half (docs/denoiser.md, "8-bit weight files").
+            // files come to about half (docs/journal/denoiser.md, "8-bit weight files").
             let ratio = int8.len() as f64 / f16.len() as f64;
             assert!(ratio < 0.75, "{m}: 8-bit file is {ratio:.2} of the f16 one");
             let (a, b) = (load(&path, &d).unwrap(), load(&q, &d).unwrap());

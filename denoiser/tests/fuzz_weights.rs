@@ -14,8 +14,7 @@ use std::path::PathBuf;
 #[global_allocator]
 static ALLOC: CappedAlloc = CappedAlloc;
 
-/// The shipped files of both backbones and of every method (the U-Net g, p, both and guided
-/// models and the KPCN half-size ones).
+/// The shipped files of every method (g, p, both and guided) and of both sizes.
 fn sources() -> Vec<PathBuf> {
     let dir = repo().join("denoiser/weights");
     let names = ["g-default", "p-default", "both-default", "guided-default", "g-half", "guided-half"];

@@ -297,7 +297,7 @@ pub fn write_pair(path: &Path, x_label: &str, x_keys: Option<Vec<f64>>, left: (&
         panel(&halves[1], right.0, x_label, right.0, right.1, x_keys)?;
     }
     draw_legend(&mut px, w, plot_h, &entries);
-    super::denoise::ensure_parent(path)?;
+    super::shared::ensure_parent(path)?;
     renderer::film::png::write_rgb8(path, w, h, px)?;
     Ok(())
 }

@@ -78,7 +78,7 @@ pub fn load(kind: GatedKind, file: Option<&Path>) -> Result<GatedDenoiser> {
             Expert::G | Expert::P => {
                 let m = if *e == Expert::G { Method::G } else { Method::P };
                 let wp = denoiser::weights::default_path(m);
-                let loaded = super::denoise::load_weights(m, Some(&wp))?;
+                let loaded = super::shared::load_weights(m, Some(&wp))?;
                 let have = gate_file::file_id(&wp)?;
                 if *e == Expert::G {
                     out.g = Some(loaded)
@@ -185,7 +185,7 @@ pub fn write_weights_png(path: &Path, width: usize, height: usize, experts: &[Ex
             super::font::bar_label(&mut px, sw, (x0, 0), w, &format!("W {}", e.name()));
         }
     }
-    super::denoise::ensure_parent(path)?;
+    super::shared::ensure_parent(path)?;
     renderer::film::png::write_rgb8(path, sw, sh, px).with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }

@@ -425,7 +425,7 @@ fn draw(path: &Path, title: &str, runs: &[(String, Run)], baselines: &[Baseline]
     for (k, note) in notes.iter().enumerate() {
         font::draw(&mut px, w, (12, TITLE_H + plot_h + legend_h + k as u32 * NOTE_H + 2), w, NOTE_SIZE, [90, 90, 90], note);
     }
-    super::denoise::ensure_parent(path)?;
+    super::shared::ensure_parent(path)?;
     renderer::film::png::write_rgb8(path, w, h, px)?;
     Ok(())
 }

@@ -98,7 +98,11 @@ pub fn run(a: ReferenceArgs) -> Result<()> {
             pb.inc(1);
         }
         pb.finish_and_clear();
-        let frame = merged.context("no samples rendered")?;
+        let mut frame = merged.context("no samples rendered")?;
+        // Everything that reads a reference scores radiance against it (eval, the regression
+        // and shipped-weight tests, `--reference`): the split and G-buffers would triple the
+        // committed file for nothing.
+        (frame.diffuse, frame.specular, frame.albedo, frame.normal, frame.depth) = (None, None, None, None, None);
         film::exr_io::write_frame(&frame, &out)?;
         film::png::write_radiance(&out.with_extension("png"), frame.width, frame.height, &frame.radiance.mean, 0.0)?;
         let info = ReferenceInfo {
@@ -139,7 +143,7 @@ fn write_readme(dir: &Path) -> Result<()> {
         ));
     }
     let text = format!(
-        "# Test-scene references\n\nEach `<scene>.exr` holds radiance, the diffuse/specular split and the G-buffers with their\nvariance-of-the-mean channels (docs/formats.md), rendered by the command in the table on this\nproject's 2-core machine; `<scene>.png` is a preview. Regenerate (resumable) with\n`cargo run --release -- reference`. The table is rewritten from the `.json` sidecars.\n\n| scene | file | size | spp | seed | render time [s] | command |\n|---|---|---|---|---|---|---|\n{}\n",
+        "# Test-scene references\n\nEach `<scene>.exr` holds radiance and its variance of the mean (docs/formats.md), rendered by the command in the table on this\nproject's 2-core machine; `<scene>.png` is a preview. Regenerate (resumable) with\n`cargo run --release -- reference`. The table is rewritten from the `.json` sidecars.\n\n| scene | file | size | spp | seed | render time [s] | command |\n|---|---|---|---|---|---|---|\n{}\n",
         rows.join("\n")
     );
     film::exr_io::write_atomically(&dir.join("README.md"), text.as_bytes())?;

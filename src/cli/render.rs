@@ -1,7 +1,7 @@
 //! `pixguide render`.
 
-use super::denoise::{self as dn, InferArgs, Model};
 use super::progress;
+use super::shared::{self as dn, InferArgs, Model};
 use anyhow::{Context, Result};
 use clap::Args;
 use denoiser::method::Method;

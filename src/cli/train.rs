@@ -2,6 +2,9 @@
 //! `pixguide dataset` folder with the staged schedule of method.md §3/§6.2; resumable.
 
 use super::progress;
+use super::train_log::{rounded, LogLine};
+// `eval` names these by this module's path; they live in `shared`.
+pub use super::shared::{git_commit, iso_date_utc};
 use crate::{alloc_stats, malloc_release};
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -122,7 +125,7 @@ pub struct TrainArgs {
     pub guided_finetune_steps: Option<usize>,
     /// Peak rate of the per-branch stage [default: the backbone's measured peak: 1e-3 for
     /// the U-Net presets, the paper's 1e-4 for KPCN ones]. Joint and from-scratch rates follow
-    /// the backbone too (docs/training.md, "Learning rate").
+    /// the backbone too (docs/journal/training.md, "Learning rate").
     #[arg(long)]
     pub lr_branches: Option<f64>,
     #[arg(long)]
@@ -135,14 +138,14 @@ pub struct TrainArgs {
     /// How the branch and joint losses weigh each patch: absolute (the paper's L1) or
     /// relative-to-input (each patch's L1 divided by its noisy input's, so every sample count
     /// counts alike) or relative-to-sqrt-input (divided by the square root of it: in between);
-    /// docs/training.md, "Loss relative to the input". relative-l2: not an L1 but the squared
+    /// docs/journal/denoiser.md, "A loss relative to the input". relative-l2: not an L1 but the squared
     /// error over the output's square + 0.01 (Noise2Noise's relMSE loss; docs/denoiser.md, "A
     /// relative L2 loss").
     #[arg(long, value_enum, default_value_t = LossScale::Absolute)]
     pub loss_scale: LossScale,
     /// Weight of a relative L2 term (Noise2Noise's relMSE loss) added to the branch and joint
     /// losses of any --loss-scale: it pulls sparse inputs towards the mean, where L1 keeps the
-    /// darker median (docs/denoiser.md, "L1 plus a relative L2 term"). 0 = not computed.
+    /// darker median (docs/journal/denoiser.md, "L1 plus a relative L2 term"). 0 = not computed.
     #[arg(long, default_value_t = 0.0, value_parser = non_negative)]
     pub rel_l2_weight: f64,
     /// Add the relative L2 term to each patch's L1 before a relative --loss-scale divides it by
@@ -273,7 +276,7 @@ const fn item(method: Method, ablation: Option<Ablation>, preset: Preset, steps:
     PlanItem { method, ablation, preset, steps, secs_per_step }
 }
 
-/// The runs of 2026-11-25 (docs/denoiser.md, "The swap models"): step counts that fill
+/// The runs of 2026-11-25 (docs/journal/denoiser.md, "The swap models"): step counts that fill
 /// ≈ 30–36 min per pretraining run and ≈ 16 min per joint run at the seconds per step measured
 /// there (one thread each, two runs side by side, patch 96, batch 2); g ends with the
 /// tone-mapped finetune. both keeps its earlier count: no both run of the current U-Net has
@@ -630,91 +633,6 @@ fn run_one(a: TrainArgs, cache: &mut DataCache) -> Result<()> {
     Ok(())
 }
 
-/// `git rev-parse HEAD` (+ "-dirty" with local changes), empty outside a repository.
-pub fn git_commit() -> String {
-    let run = |args: &[&str]| {
-        std::process::Command::new("git")
-            .args(args)
-            .output()
-            .ok()
-            .filter(|o| o.status.success())
-            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-    };
-    match run(&["rev-parse", "HEAD"]) {
-        Some(h) => {
-            let dirty = run(&["status", "--porcelain", "--untracked-files=no"]).is_some_and(|s| !s.is_empty());
-            if dirty {
-                format!("{h}-dirty")
-            } else {
-                h
-            }
-        }
-        None => String::new(),
-    }
-}
-
-/// Now as ISO 8601 UTC (civil-from-days, Howard Hinnant's algorithm).
-pub fn iso_date_utc() -> String {
-    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs() as i64).unwrap_or(0);
-    let (days, rem) = (secs.div_euclid(86400), secs.rem_euclid(86400));
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + if m <= 2 { 1 } else { 0 };
-    format!("{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z", rem / 3600, rem / 60 % 60, rem % 60)
-}
-
-/// One line of `<output>.log.jsonl` (read back by `pixguide plot-training`). Non-finite losses
-/// come out as `null`, which serde_json writes for them.
-#[derive(serde::Serialize)]
-#[serde(tag = "event", rename_all = "snake_case")]
-enum LogLine<'a> {
-    Stage {
-        stage: usize,
-        kind: &'a str,
-        steps: usize,
-        from_step: usize,
-        steps_per_epoch: usize,
-        lr_rest: Option<f64>,
-        lr_e: Option<f64>,
-    },
-    Step {
-        stage: usize,
-        step: usize,
-        loss: f64,
-        seconds: f64,
-    },
-    /// `by_spp`: [spp, relMSE] pairs, the same measure at each of the dataset's sample counts.
-    Val {
-        stage: usize,
-        step: usize,
-        total_step: usize,
-        rel_mse: f64,
-        by_spp: Vec<(usize, f64)>,
-        best: bool,
-        seconds: f64,
-    },
-    Checkpoint {
-        dir: String,
-    },
-    StageEnd {
-        stage: usize,
-        steps: usize,
-        reason: &'a str,
-    },
-}
-
-/// `v` to `digits` decimals: timings are logged no finer than they are measured.
-fn rounded(v: f64, digits: i32) -> f64 {
-    let k = 10f64.powi(digits);
-    (v * k).round() / k
-}
-
 /// A finite weight ≥ 0, for the loss-term flags.
 fn non_negative(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
@@ -726,7 +644,7 @@ fn non_negative(s: &str) -> Result<f64, String> {
 
 #[cfg(test)]
 mod tests {
-    use super::{rounded, with_widths, LogLine};
+    use super::with_widths;
     use denoiser::kpcn::Variant;
     use denoiser::model::Preset;
 
@@ -755,37 +673,5 @@ mod tests {
         assert_eq!(mixed.mskp_for(Variant::P).unwrap().widths, narrow);
         assert!(with_widths(base.clone(), None, Some(&[36, 48])).is_err());
         assert!(with_widths(Preset::Kpcn.config(), None, Some(&[36, 48, 72, 96, 120])).is_err());
-    }
-
-    /// The log lines read exactly as the hand-written JSON they replaced.
-    #[test]
-    fn log_lines_keep_their_text() {
-        let line = |l: LogLine| serde_json::to_string(&l).unwrap();
-        let stage =
-            LogLine::Stage { stage: 0, kind: "branches", steps: 50, from_step: 0, steps_per_epoch: 5, lr_rest: Some(0.001), lr_e: None };
-        assert_eq!(
-            line(stage),
-            r#"{"event":"stage","stage":0,"kind":"branches","steps":50,"from_step":0,"steps_per_epoch":5,"lr_rest":0.001,"lr_e":null}"#
-        );
-        let step = LogLine::Step { stage: 1, step: 7, loss: f64::NAN, seconds: rounded(0.123_456, 4) };
-        assert_eq!(line(step), r#"{"event":"step","stage":1,"step":7,"loss":null,"seconds":0.1235}"#);
-        let val = LogLine::Val {
-            stage: 1,
-            step: 7,
-            total_step: 9,
-            rel_mse: 0.0125,
-            by_spp: vec![(2, 0.02), (64, 0.005)],
-            best: true,
-            seconds: rounded(12.345_6, 2),
-        };
-        assert_eq!(
-            line(val),
-            r#"{"event":"val","stage":1,"step":7,"total_step":9,"rel_mse":0.0125,"by_spp":[[2,0.02],[64,0.005]],"best":true,"seconds":12.35}"#
-        );
-        assert_eq!(line(LogLine::Checkpoint { dir: "a \"b\"".into() }), r#"{"event":"checkpoint","dir":"a \"b\""}"#);
-        assert_eq!(
-            line(LogLine::StageEnd { stage: 0, steps: 10, reason: "steps done" }),
-            r#"{"event":"stage_end","stage":0,"steps":10,"reason":"steps done"}"#
-        );
     }
 }

@@ -101,8 +101,8 @@ pub fn run(a: TrainGateArgs) -> Result<()> {
     let t0 = std::time::Instant::now();
     // Every expert the cache can hold is loaded, so one cache serves g,p and oidn,g,p runs alike.
     let (gp, pp) = (weights_path(Method::G, &a.g_weights), weights_path(Method::P, &a.p_weights));
-    let g = super::denoise::load_weights(Method::G, Some(&gp))?;
-    let p = super::denoise::load_weights(Method::P, Some(&pp))?;
+    let g = super::shared::load_weights(Method::G, Some(&gp))?;
+    let p = super::shared::load_weights(Method::P, Some(&pp))?;
     let oidn = match super::oidn_setup::load() {
         Ok((o, _)) => Some(o),
         Err(e) if !experts.contains(&Expert::Oidn) => {
@@ -153,7 +153,7 @@ pub fn run(a: TrainGateArgs) -> Result<()> {
         logit_noise: a.logit_noise,
     };
     let log_path = PathBuf::from(format!("{}.log.jsonl", a.output.display()));
-    super::denoise::ensure_parent(&a.output)?;
+    super::shared::ensure_parent(&a.output)?;
     let mut log = std::io::BufWriter::new(std::fs::File::create(&log_path).with_context(|| format!("creating {}", log_path.display()))?);
     let bar = super::progress::bar(a.steps as u64, "training E");
     if a.quiet {
@@ -190,8 +190,8 @@ pub fn run(a: TrainGateArgs) -> Result<()> {
         wall_time_s: t0.elapsed().as_secs_f64(),
         validation_rel_mse: trained.best.rel_mse,
         steps: trained.best.step as u64,
-        git_commit: super::train::git_commit(),
-        date: super::train::iso_date_utc(),
+        git_commit: super::shared::git_commit(),
+        date: super::shared::iso_date_utc(),
         notes: format!(
             "E over frozen experts; cache {:.0} s, training {:.0} s; best validation at step {} of {}",
             cache_s, trained.seconds, trained.best.step, a.steps

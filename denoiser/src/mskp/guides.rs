@@ -59,7 +59,7 @@ pub enum EdgeStopping {
 /// samples both found no light reports v = 0, and its distance to a lit neighbour came out twice
 /// the neighbour's distance to it. Zero pixels then refused the lit ones while the lit ones took
 /// the zeros in: veach-ajar at 2 spp came out at 0.54 of the reference's brightness (median over
-/// pixels; docs/denoiser.md, "Two-sided noise test").
+/// pixels; docs/journal/denoiser.md, "Two-sided noise test").
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GuideGroup {
     pub start: usize,
@@ -188,7 +188,7 @@ const NOISE_EPS: f32 = 1e-4;
 /// at 2 spp, where the test matters most (a pixel with one lit sample of two is then exactly
 /// consistent with a black neighbour). With the pixel's own variance (factor 1) the shipped
 /// one-sided weights still left veach-ajar at 0.67 of its brightness at 2 spp, at 2 at 0.81
-/// (docs/denoiser.md, "Two-sided noise test"). At high spp a difference must exceed 1.4 σ
+/// (docs/journal/denoiser.md, "Two-sided noise test"). At high spp a difference must exceed 1.4 σ
 /// instead of 1 σ before it costs anything; the learned strength scales what is beyond.
 const TWO_SIDED_NOISE_FACTOR: f32 = 2.0;
 
@@ -342,7 +342,7 @@ const UPSAMPLE_FALLBACK_LOG_WEIGHT: f32 = -6.0;
 /// each fine pixel p averages its 3×3 coarse neighbours q with the bilinear weights times
 /// exp(−Σ_g s_g(p)·‖g(q) − g(p)‖²), renormalised, where g(q) are the coarse level's guides and
 /// g(p) this level's. Plain bilinear upsampling carried a quarter of a bright coarse pixel across
-/// every silhouette into the convex blend (docs/denoiser.md, "Error floors").
+/// every silhouette into the convex blend (docs/journal/denoiser.md, "Error floors").
 ///
 /// A tenth tap holds `fallback` (the fine level's own filtered value) at a small fixed weight:
 /// a small feature (a 3×3 shadow, a thin edge) has no coarse pixel of its own, so every coarse tap

@@ -20,11 +20,11 @@
 //! undershoot at an edge (inference clamps radiance at 0). The swap is Vogels et al. 2018's scale
 //! compositor, ⚠ the subject of US patent 10,699,382 (docs/method.md §12): it is opt-in (the
 //! `swap` preset, kernels at all 5 levels) until the project decides it may ship it; the
-//! measured difference is in docs/denoiser.md ("The swap models").
+//! measured difference is in docs/journal/denoiser.md ("The swap models").
 //!
 //! Edge stopping (`edge_stopping`, the `edge` preset): a softmax kernel predicted by the U-Net
 //! alone leaked 5–25 % of a bright neighbour across silhouettes and around emitters even on a
-//! 1024-spp input (docs/denoiser.md, "Error floors"). With guide groups (colour as log(1+c),
+//! 1024-spp input (docs/journal/denoiser.md, "Error floors"). With guide groups (colour as log(1+c),
 //! normal, depth, albedo for D_G; colour and f_P for D_P) every tap's logit is lowered by
 //! Σ_g w_g·‖s_g·(g(q) − g(p))‖² (for the colour only where q is brighter), with per-pixel strengths w_g = exp(·) predicted by the same
 //! head: the cross-bilateral weighting of Kalantari et al. 2015 (method.md §12) inside a learned

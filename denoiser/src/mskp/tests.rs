@@ -336,7 +336,7 @@ fn doubting_black_centres_keeps_the_brightness_of_a_sparse_4spp_image() {
 /// not take it in: the one-sided test explains only what the neighbour's own noise adds
 /// (2·10⁻⁶), so at strength e^3 they keep their value; the two-sided test calls the same
 /// difference noise (Δ² < 2(v_p + v_q)) and lets it in: the price of the two-sided test, paid on
-/// glass-still-life's caustics at 32–64 spp (docs/denoiser.md, "The two-sided noise test").
+/// glass-still-life's caustics at 32–64 spp (docs/journal/denoiser.md, "The two-sided noise test").
 /// The fading test keeps 1/63 of the two-sided subtraction at 64 spp, and the firefly out.
 #[test]
 fn one_sided_own_variance_guide_keeps_a_firefly_out_of_its_neighbours() {

@@ -12,7 +12,7 @@ use crate::method::MethodModel;
 
 /// The candidates `pixguide calibrate` tries by default: 0 (no gain, the weights as trained) to
 /// 3, finest around 1. The shipped edge-noise models scored best at 1 (g), 1.25 (guided) and
-/// 2.5 (p) (docs/denoiser.md, "Guide strength grows with the sample count"); the grid brackets
+/// 2.5 (p) (docs/journal/denoiser.md, "Guide strength grows with the sample count"); the grid brackets
 /// them.
 pub const DEFAULT_EXPONENTS: [f64; 9] = [0.0, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0];
 

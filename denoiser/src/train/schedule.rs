@@ -15,7 +15,7 @@ pub enum StageKind {
     /// L1 on the recombined radiance after the evaluation's tone map (a) of method.md §7.3
     /// ([`crate::loss::l1_tonemapped`]); the U-Net presets' finetune. Linear L1 lets a shadow
     /// pixel borrow its lit neighbour's light at almost no cost, while the test relMSE counts
-    /// that as a large relative error (docs/denoiser.md, "Error floors").
+    /// that as a large relative error (docs/journal/denoiser.md, "Error floors").
     FinetuneToneMapped,
     /// Guided: per-branch L1 on I_E + w_path·L_path, E and the rest at their own rates.
     Joint,
@@ -105,34 +105,8 @@ impl Stage {
     }
 }
 
-/// The ablations of Seed Table 2 (for the guided method).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum Ablation {
-    /// Everything from scratch, jointly.
-    FullNFull,
-    /// Pretrained D_G, D_P and PathNets frozen; only E trains.
-    FixNTrain,
-    /// E sees only sg(I_G), sg(I_P).
-    RadianceOnly,
-}
-
-impl Ablation {
-    pub const ALL: [Ablation; 3] = [Ablation::FullNFull, Ablation::FixNTrain, Ablation::RadianceOnly];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Ablation::FullNFull => "full-n-full",
-            Ablation::FixNTrain => "fix-n-train",
-            Ablation::RadianceOnly => "radiance-only",
-        }
-    }
-
-    pub fn parse(s: &str) -> Option<Self> {
-        s.parse().ok()
-    }
-}
-
-crate::names::named!(Ablation, "ablation");
+// The ablations name weight files too, so they live with the methods, below training.
+pub use crate::method::Ablation;
 
 /// The loss of the finetune stage (on the recombined radiance).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -187,7 +161,7 @@ pub struct ScheduleOptions {
     /// Steps of a finetune of the whole guided model (E, columns and PathNets at
     /// `lr_finetune`, `finetune_loss` on the blended radiance) after its joint stage; 0 = none,
     /// the paper's schedule. The joint loss weighs each branch in its own units; this stage
-    /// trains the blend on the measure the evaluation uses (docs/training.md, "Guided finetune").
+    /// trains the blend on the measure the evaluation uses (docs/training.md, "Commands": `--guided-finetune-steps`).
     #[serde(default)]
     pub guided_finetune_steps: usize,
     /// The branch and joint losses.
