@@ -22,11 +22,14 @@ pub struct DenoiseArgs {
     /// Denoiser: g (a kernel-predicting U-Net on the G-buffers: albedo, normal, depth), p (the
     /// same network on the P-buffers a path-manifold network makes from per-sample path
     /// descriptors), both (one network on G- and P-buffers), guided (g and p blended per pixel
-    /// by an ensembling network: the paper's method), or oidn (Intel Open Image Denoise, the
-    /// baseline; installed into target/oidn-venv from PyPI the first time).
+    /// by the ensembling network E: the paper's method), guided-oidn (E over OIDN, g and p),
+    /// guided-joint (the older guided model, E trained jointly with its own g and p), or oidn
+    /// (Intel Open Image Denoise, the baseline; installed into target/oidn-venv from PyPI the
+    /// first time).
     #[arg(long, default_value = "guided")]
     pub model: Model,
-    /// Weight file (default: denoiser/weights/<model>-default.safetensors).
+    /// Weight file (default: denoiser/weights/<model>-default.safetensors; for guided and
+    /// guided-oidn the gate file, default denoiser/weights/<model>-e.safetensors).
     #[arg(long)]
     pub weights: Option<PathBuf>,
     /// Output EXR (denoised radiance).
@@ -35,8 +38,9 @@ pub struct DenoiseArgs {
     /// Also write a tone-mapped PNG preview here.
     #[arg(long)]
     pub png: Option<PathBuf>,
-    /// Write W_G (the G-buffer denoiser's share per pixel, guided model only) as a colour-mapped
-    /// PNG: diffuse branch left, specular branch right, viridis from W_G = 0 (dark) to 1 (yellow).
+    /// Write each denoiser's share per pixel (guided, guided-oidn, guided-joint) as a
+    /// colour-mapped PNG, one panel per expert (guided-joint: W_G of the diffuse and specular
+    /// branch), viridis from 0 (dark) to 1 (yellow).
     #[arg(long)]
     pub weights_png: Option<PathBuf>,
     /// Reference EXR: print relMSE and 1 − SSIM of the noisy and the denoised image.
@@ -47,12 +51,12 @@ pub struct DenoiseArgs {
 }
 
 pub fn run(a: DenoiseArgs) -> Result<()> {
-    let method = match a.model {
-        Model::Net(m) => m,
+    // Weights first: a missing file should not cost the time of reading a large frame.
+    let (loaded, gated) = match a.model {
+        Model::Net(m) => (Some(load_weights(m, a.weights.as_deref())?), None),
+        Model::Gated(k) => (None, Some(super::gated::load(k, a.weights.as_deref())?)),
         Model::Oidn => return run_oidn(&a),
     };
-    // Weights first: a missing file should not cost the time of reading a large frame.
-    let loaded = load_weights(method, a.weights.as_deref())?;
     let mut frame = film::exr_io::read_frame(&a.frame).with_context(|| format!("reading {}", a.frame.display()))?;
     for (name, b) in [
         ("diffuse", &frame.diffuse),
@@ -65,7 +69,7 @@ pub fn run(a: DenoiseArgs) -> Result<()> {
             bail!("{} has no {name} buffer: the denoiser needs the frame written by `pixguide render --aovs`", a.frame.display());
         }
     }
-    if loaded.method.needs_descriptors() {
+    if a.model.needs_descriptors() {
         let path = a.descriptors.clone().unwrap_or_else(|| {
             let stem = a.frame.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
             a.frame.with_file_name(format!("{stem}.descriptors.safetensors"))
@@ -73,7 +77,7 @@ pub fn run(a: DenoiseArgs) -> Result<()> {
         if !path.exists() {
             bail!(
                 "the {} model needs per-sample path descriptors: {} does not exist (render with --aovs, pass --descriptors FILE, or use --model g)",
-                loaded.method,
+                a.model.name(),
                 path.display()
             );
         }
@@ -93,13 +97,25 @@ pub fn run(a: DenoiseArgs) -> Result<()> {
         }
         frame.descriptors = Some(d);
     }
-    let run = denoise_frame(&mut frame, &loaded, &a.infer.options()).with_context(|| format!("denoising {}", a.frame.display()))?;
-    print_denoise_summary(&loaded, &run);
-    write_outputs(&run.denoised, frame.spp, &a.output, a.png.as_deref(), a.weights_png.as_deref())?;
+    let denoised = if let Some(g) = gated {
+        let run = g.run(&mut frame, &a.infer.options()).with_context(|| format!("denoising {}", a.frame.display()))?;
+        g.print_summary(&run);
+        write_outputs(&run.denoised, frame.spp, &a.output, a.png.as_deref(), None)?;
+        if let Some(p) = &a.weights_png {
+            super::gated::write_weights_png(p, run.denoised.width, run.denoised.height, g.experts(), &run.weights)?;
+        }
+        run.denoised
+    } else {
+        let loaded = loaded.expect("a network model");
+        let run = denoise_frame(&mut frame, &loaded, &a.infer.options()).with_context(|| format!("denoising {}", a.frame.display()))?;
+        print_denoise_summary(&loaded, &run);
+        write_outputs(&run.denoised, frame.spp, &a.output, a.png.as_deref(), a.weights_png.as_deref())?;
+        run.denoised
+    };
     if let Some(r) = &a.reference {
         let reference = read_reference(r, frame.width, frame.height)?;
         println!("{}", error_line("noisy", &frame.radiance.mean, &reference));
-        println!("{}", error_line("denoised", &run.denoised.radiance, &reference));
+        println!("{}", error_line("denoised", &denoised.radiance, &reference));
     }
     Ok(())
 }
@@ -110,7 +126,7 @@ fn run_oidn(a: &DenoiseArgs) -> Result<()> {
         bail!("--weights does not apply to --model oidn (OIDN brings its own weights)");
     }
     if a.weights_png.is_some() {
-        bail!("--weights-png needs --model guided (only the guided model blends two denoisers)");
+        bail!("--weights-png needs --model guided, guided-oidn or guided-joint (only they blend denoisers)");
     }
     // The library before the frame: a failed install should not cost the time of reading it.
     let (oidn, load_s) = super::oidn_setup::load()?;

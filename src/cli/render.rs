@@ -43,13 +43,15 @@ pub struct RenderArgs {
     /// descriptors in `<output>.descriptors.safetensors`, a PNG of each buffer and a contact sheet.
     #[arg(long)]
     pub aovs: bool,
-    /// Denoise in the same process: guided (the paper's method), g, p, both, oidn (Intel Open
-    /// Image Denoise, the baseline), or none. `-o` and `--png` then get the denoised image.
-    /// Records only the buffers the model needs (per-sample descriptors only for p, both and
-    /// guided).
+    /// Denoise in the same process: guided (g and p blended per pixel by the ensembling network
+    /// E: the paper's method), guided-oidn (E over OIDN, g and p), g, p, both, guided-joint (E
+    /// trained jointly with its own g and p), oidn (Intel Open Image Denoise, the baseline), or
+    /// none. `-o` and `--png` then get the denoised image. Records only the buffers the model
+    /// needs (per-sample descriptors for every model but g and oidn).
     #[arg(long, default_value = "none")]
     pub denoise: DenoiseModel,
-    /// Weight file for --denoise (default: denoiser/weights/<model>-default.safetensors).
+    /// Weight file for --denoise (default: denoiser/weights/<model>-default.safetensors; for guided
+    /// and guided-oidn the gate, default denoiser/weights/<model>-e.safetensors).
     #[arg(long)]
     pub weights: Option<PathBuf>,
     /// With --denoise: also write the noisy frame here.
@@ -58,8 +60,8 @@ pub struct RenderArgs {
     /// Reference EXR: print relMSE and 1 − SSIM (method.md §7.3) of the noisy and the denoised image.
     #[arg(long)]
     pub reference: Option<PathBuf>,
-    /// With --denoise guided: write W_G (the G-buffer denoiser's share per pixel) as a
-    /// colour-mapped PNG, diffuse branch left, specular right.
+    /// With --denoise guided or guided-oidn: write each denoiser's share per pixel as a
+    /// colour-mapped PNG, one panel per expert (guided-joint: W_G, diffuse and specular branch).
     #[arg(long)]
     pub weights_png: Option<PathBuf>,
     #[command(flatten)]
@@ -81,7 +83,7 @@ pub struct DenoiseModel(pub Option<Model>);
 
 impl clap::ValueEnum for DenoiseModel {
     fn value_variants<'a>() -> &'a [Self] {
-        const ALL: [DenoiseModel; 6] = {
+        const ALL: [DenoiseModel; 8] = {
             let m = Model::ALL;
             [
                 DenoiseModel(Some(m[0])),
@@ -89,6 +91,8 @@ impl clap::ValueEnum for DenoiseModel {
                 DenoiseModel(Some(m[2])),
                 DenoiseModel(Some(m[3])),
                 DenoiseModel(Some(m[4])),
+                DenoiseModel(Some(m[5])),
+                DenoiseModel(Some(m[6])),
                 DenoiseModel(None),
             ]
         };
@@ -103,18 +107,20 @@ impl clap::ValueEnum for DenoiseModel {
 enum Denoiser {
     /// Boxed: the weights header makes `Loaded` large next to `Oidn`.
     Net(Box<Loaded>),
+    Gated(Box<super::gated::GatedDenoiser>),
     /// With the seconds its loading took.
     Oidn(Oidn, f64),
 }
 
 pub fn run(a: RenderArgs) -> Result<()> {
-    if a.weights_png.is_some() && a.denoise.0 != Some(Model::Net(Method::Guided)) {
-        anyhow::bail!("--weights-png needs --denoise guided (only the guided model blends two denoisers)");
+    if a.weights_png.is_some() && !matches!(a.denoise.0, Some(Model::Net(Method::Guided) | Model::Gated(_))) {
+        anyhow::bail!("--weights-png needs --denoise guided, guided-oidn or guided-joint (only they blend denoisers)");
     }
     // Weights (or OIDN) before the render, so that a missing file costs nothing.
     let loaded = match a.denoise.0 {
         None => None,
         Some(Model::Net(m)) => Some(Denoiser::Net(Box::new(dn::load_weights(m, a.weights.as_deref())?))),
+        Some(Model::Gated(k)) => Some(Denoiser::Gated(Box::new(super::gated::load(k, a.weights.as_deref())?))),
         Some(Model::Oidn) => {
             if a.weights.is_some() {
                 anyhow::bail!("--weights does not apply to --denoise oidn (OIDN brings its own weights)");
@@ -136,7 +142,9 @@ pub fn run(a: RenderArgs) -> Result<()> {
     }
     let request = match (a.aovs, a.denoise.0) {
         (true, _) => BufferRequest::ALL,
-        (false, Some(Model::Net(m))) => BufferRequest { split: true, gbuffers: true, descriptors: m.needs_descriptors() },
+        (false, Some(m @ (Model::Net(_) | Model::Gated(_)))) => {
+            BufferRequest { split: true, gbuffers: true, descriptors: m.needs_descriptors() }
+        }
         (false, Some(Model::Oidn)) => BufferRequest { split: false, gbuffers: true, descriptors: false },
         (false, None) => BufferRequest::RADIANCE_ONLY,
     };
@@ -183,13 +191,22 @@ pub fn run(a: RenderArgs) -> Result<()> {
             dn::print_denoise_summary(&loaded, &run);
             run.denoised
         }
+        Denoiser::Gated(g) => {
+            let run = g.run(&mut frame, &a.infer.options())?;
+            g.print_summary(&run);
+            if let Some(p) = &a.weights_png {
+                super::gated::write_weights_png(p, run.denoised.width, run.denoised.height, g.experts(), &run.weights)?;
+            }
+            run.denoised
+        }
         Denoiser::Oidn(oidn, load_s) => {
             let d = super::oidn_setup::denoise_frame(&oidn, &frame)?;
             super::oidn_setup::print_summary(&oidn, load_s, &d);
             d
         }
     };
-    dn::write_outputs(&denoised, frame.spp, &a.output, None, a.weights_png.as_deref())?;
+    let weights_png = if denoised.weights_g.is_some() { a.weights_png.as_deref() } else { None };
+    dn::write_outputs(&denoised, frame.spp, &a.output, None, weights_png)?;
     if let Some(png) = &a.png {
         film::png::write_radiance(png, frame.width, frame.height, &denoised.radiance, a.exposure)?;
     }

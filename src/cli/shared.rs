@@ -11,6 +11,8 @@ use denoiser::weights::{self, Loaded};
 use renderer::film::{self, Frame};
 use std::path::Path;
 
+pub use super::gated::GatedKind;
+
 /// Tiling options of inference (`denoise`, `render --denoise`, `eval`).
 #[derive(Args, Clone)]
 pub struct InferArgs {
@@ -30,27 +32,50 @@ impl InferArgs {
     }
 }
 
-/// A denoiser the commands can run: one of our networks, or Open Image Denoise.
+/// A denoiser the commands can run: one of our networks, a gate over several denoisers, or Open
+/// Image Denoise.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Model {
+    /// One weight file: g, p, both, or the jointly trained guided model (`guided-joint`).
     Net(Method),
+    /// Network E over frozen experts (`guided`: g and p; `guided-oidn`: OIDN, g and p).
+    Gated(GatedKind),
     Oidn,
 }
 
 impl Model {
-    /// Every model, in the order help texts list them: the methods' own order, then OIDN.
-    pub const ALL: [Model; 5] =
-        [Model::Net(Method::G), Model::Net(Method::P), Model::Net(Method::Both), Model::Net(Method::Guided), Model::Oidn];
+    /// Every model, in the order help texts list them.
+    pub const ALL: [Model; 7] = [
+        Model::Net(Method::G),
+        Model::Net(Method::P),
+        Model::Net(Method::Both),
+        Model::Gated(GatedKind::Guided),
+        Model::Gated(GatedKind::GuidedOidn),
+        Model::Net(Method::Guided),
+        Model::Oidn,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
+            // The name `guided` belongs to the gated model users run; the joint one keeps its own.
+            Model::Net(Method::Guided) => "guided-joint",
             Model::Net(m) => m.name(),
+            Model::Gated(k) => k.name(),
             Model::Oidn => "oidn",
+        }
+    }
+
+    /// Whether the renderer must record per-sample path descriptors for it.
+    pub fn needs_descriptors(self) -> bool {
+        match self {
+            Model::Net(m) => m.needs_descriptors(),
+            Model::Gated(_) => true,
+            Model::Oidn => false,
         }
     }
 }
 
-/// The methods' names come from `Method` (denoiser/src/names.rs); only `oidn` is added here.
+/// Names as `--model` and `--denoise` spell them.
 impl clap::ValueEnum for Model {
     fn value_variants<'a>() -> &'a [Self] {
         &Model::ALL

@@ -10,7 +10,7 @@ use super::file::Gate;
 use super::{blend, features, Expert, GateConfig, GateFrame, GateNet};
 use crate::infer::{self, InferOptions};
 use crate::oidn::Oidn;
-use crate::preprocess;
+use crate::preprocess::{self, PreparedImage};
 use crate::weights::Loaded;
 
 /// The loaded experts a gate may call on.
@@ -79,11 +79,26 @@ pub fn run_experts(
     opts: &InferOptions,
     device: &Device,
 ) -> Result<ExpertOutputs, GateError> {
-    let (w, h) = (frame.width as usize, frame.height as usize);
     let nets = which.iter().any(|e| *e != Expert::Oidn);
     let t = Instant::now();
     let prepared = if nets { Some(preprocess::prepare_for_inference(frame)?) } else { None };
     let prepare_s = t.elapsed().as_secs_f64();
+    let mut out = run_experts_prepared(frame, prepared.as_ref(), which, experts, opts, device)?;
+    out.prepare_s = prepare_s;
+    Ok(out)
+}
+
+/// [`run_experts`] on a frame already prepared (`prepared`, needed by the g and p experts), as
+/// `pixguide eval` has it; `prepare_s` is left at 0.
+pub fn run_experts_prepared(
+    frame: &Frame,
+    prepared: Option<&PreparedImage>,
+    which: &[Expert],
+    experts: &Experts,
+    opts: &InferOptions,
+    device: &Device,
+) -> Result<ExpertOutputs, GateError> {
+    let (w, h) = (frame.width as usize, frame.height as usize);
     let mut images = Vec::new();
     let mut seconds = Vec::new();
     for &e in which {
@@ -97,10 +112,10 @@ pub fn run_experts(
             }
             Expert::G | Expert::P => {
                 let loaded = if e == Expert::G { experts.g } else { experts.p }.ok_or(GateError::MissingExpert(e))?;
-                if loaded.method.needs_descriptors() && prepared.as_ref().is_some_and(|p| p.records.is_none() && p.descriptors.is_none()) {
+                let image = prepared.ok_or(GateError::MissingBuffer("prepared network input"))?;
+                if loaded.method.needs_descriptors() && image.records.is_none() && image.descriptors.is_none() {
                     return Err(infer::InferError::MissingDescriptors(loaded.method).into());
                 }
-                let image = prepared.as_ref().expect("prepared for the networks");
                 infer::denoise(&loaded.model, &loaded.config, image, &frame.radiance.mean, opts, device)?.radiance
             }
         };
@@ -108,8 +123,8 @@ pub fn run_experts(
         images.push(image.into_iter().map(|v| if v.is_finite() { v.clamp(0.0, infer::MAX_RADIANCE) } else { 0.0 }).collect());
         seconds.push(t.elapsed().as_secs_f64());
     }
-    let passthrough = prepared.map(|p| p.passthrough).unwrap_or_default();
-    Ok(ExpertOutputs { images, passthrough, seconds, prepare_s })
+    let passthrough = prepared.map(|p| p.passthrough.clone()).unwrap_or_default();
+    Ok(ExpertOutputs { images, passthrough, seconds, prepare_s: 0.0 })
 }
 
 /// Output side of one window of E; E's receptive radius (about 20 px for three levels) is well
