@@ -98,7 +98,10 @@ pub fn rel_mse(x: &[f32], y: &[f32], w: usize, h: usize, map: ToneMap, border: u
 pub fn rel_mse_map(x: &[f32], y: &[f32], w: usize, h: usize, map: ToneMap) -> Vec<f64> {
     check(x, y, w, h);
     let (a, b) = (tonemap(x, map), tonemap(y, map));
-    a.chunks(3).zip(b.chunks(3)).map(|(p, q)| p.iter().zip(q).map(|(x, y)| (x - y).powi(2) / (y * y + REL_MSE_EPS)).sum::<f64>() / 3.0).collect()
+    a.chunks(3)
+        .zip(b.chunks(3))
+        .map(|(p, q)| p.iter().zip(q).map(|(x, y)| (x - y).powi(2) / (y * y + REL_MSE_EPS)).sum::<f64>() / 3.0)
+        .collect()
 }
 
 /// Validation relMSE: ½ · mean (x − y)² / (y² + 0.01) on linear radiance (any layout; `y` is

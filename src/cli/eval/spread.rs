@@ -97,7 +97,11 @@ pub(super) fn write(w: &mut String, v: &View, rows: &[Row]) -> std::fmt::Result 
                 .iter()
                 .map(|&spp| {
                     let each: Vec<Vec<Option<f64>>> = base.iter().map(|b| v.complete_seed_means(spp, b, metric)).collect();
-                    (0..n).map(|k| each.iter().map(|e| e[k]).collect::<Option<Vec<f64>>>().map(|x| x.into_iter().fold(f64::INFINITY, f64::min))).collect()
+                    (0..n)
+                        .map(|k| {
+                            each.iter().map(|e| e[k]).collect::<Option<Vec<f64>>>().map(|x| x.into_iter().fold(f64::INFINITY, f64::min))
+                        })
+                        .collect()
                 })
                 .collect();
             for r in &avail {
