@@ -245,7 +245,8 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
          reference over that block — the error being this page's relMSE (after tone map (a)) restricted to the block; ties go to the \
          expert listed first — and the image so assembled is scored like every method, relMSE and 1−SSIM over the whole image. It \
          says how much a per-pixel choice among those outputs, such as the guided model's E makes, could gain at most at that \
-         granularity.\n"
+         granularity. The choice minimises relMSE, not 1−SSIM: the seams between blocks from different experts can make a bound's \
+         1−SSIM higher than that of its best expert.\n"
     )?;
     writeln!(w, "| method | weights | status |\n|---|---|---|")?;
     for m in &o.methods {

@@ -87,10 +87,10 @@ pub(super) fn write(w: &mut String, v: &View, rows: &[Row]) -> std::fmt::Result 
         for metric in [Metric::RelMse, Metric::Ssim] {
             writeln!(
                 w,
-                "Mean {0} over the scenes ÷ that of {what}{1}, at each seed, then {2} (below 1: better than {what}):\n",
+                "Mean {0} over the scenes ÷ that of {what}{1}{2} (below 1: better than {what}):\n",
                 metric.name(),
                 if base.len() > 1 { " (the lower of the two means)" } else { "" },
-                if n > 1 { "mean ± standard error [min–max] over the seeds" } else { "at the one seed" }
+                if n > 1 { ", at each seed, then the mean ± standard error [min–max] of that ratio over the seeds" } else { "" }
             )?;
             header(w, "method")?;
             let den: Vec<Vec<Option<f64>>> = spps
