@@ -5,6 +5,9 @@
 use super::report::{f, mean, Metric, Row, View};
 use std::fmt::Write as _;
 
+/// A record's mean weight per expert, by expert name.
+type Weights = Vec<(String, f64)>;
+
 /// Mean, standard error of the mean (sample standard deviation / √n; 0 for one value), min, max.
 fn stats(v: &[f64]) -> Option<(f64, f64, f64, f64)> {
     let m = mean(v)?;
@@ -127,11 +130,10 @@ fn weights(w: &mut String, v: &View, avail: &[&Row], spps: &[u32]) -> std::fmt::
     for r in avail {
         // (scene index, spp) → the records' weight lists over the seeds.
         let mut keys: Vec<String> = Vec::new();
-        let mut cells: Vec<(usize, u32, Vec<&Vec<(String, f64)>>)> = Vec::new();
+        let mut cells: Vec<(usize, u32, Vec<&Weights>)> = Vec::new();
         for (si, s) in o.scenes.iter().enumerate() {
             for &spp in spps {
-                let ws: Vec<&Vec<(String, f64)>> =
-                    a.seeds.iter().filter_map(|&seed| v.rec(s, spp, r, seed).and_then(|x| x.mean_w.as_ref())).collect();
+                let ws: Vec<&Weights> = a.seeds.iter().filter_map(|&seed| v.rec(s, spp, r, seed).and_then(|x| x.mean_w.as_ref())).collect();
                 for list in &ws {
                     for (k, _) in list.iter() {
                         if !keys.contains(k) {
@@ -157,13 +159,13 @@ fn weights(w: &mut String, v: &View, avail: &[&Row], spps: &[u32]) -> std::fmt::
             )?;
             any = true;
         }
-        let value = |list: &[&Vec<(String, f64)>], k: &str| -> Option<f64> {
+        let value = |list: &[&Weights], k: &str| -> Option<f64> {
             mean(&list.iter().filter_map(|l| l.iter().find(|(n, _)| n == k).map(|x| x.1)).collect::<Vec<_>>())
         };
         writeln!(w, "### {}\n", r.label)?;
         writeln!(w, "| spp | {} |\n|---|{}", keys.join(" | "), "---|".repeat(keys.len()))?;
         for &spp in spps {
-            let all: Vec<&Vec<(String, f64)>> = cells.iter().filter(|c| c.1 == spp).flat_map(|c| c.2.iter().copied()).collect();
+            let all: Vec<&Weights> = cells.iter().filter(|c| c.1 == spp).flat_map(|c| c.2.iter().copied()).collect();
             if all.is_empty() {
                 continue;
             }
