@@ -91,6 +91,19 @@ pub fn rel_mse(x: &[f32], y: &[f32], w: usize, h: usize, map: ToneMap, border: u
     (s / a.len() as f64).min(1e300)
 }
 
+/// Per-pixel test relMSE: for each pixel the mean over its three channels of (x − y)² / (y² + 1e-4)
+/// after `map`, `[H, W]` in reading order; `y` is the reference. Its mean is [`rel_mse`] without
+/// border, so sums of it over any set of pixels rank images the way the page's relMSE does (the
+/// block oracle of `pixguide eval` and the error maps of its pictures).
+pub fn rel_mse_map(x: &[f32], y: &[f32], w: usize, h: usize, map: ToneMap) -> Vec<f64> {
+    check(x, y, w, h);
+    let (a, b) = (tonemap(x, map), tonemap(y, map));
+    a.chunks(3)
+        .zip(b.chunks(3))
+        .map(|(p, q)| p.iter().zip(q).map(|(x, y)| (x - y).powi(2) / (y * y + REL_MSE_EPS)).sum::<f64>() / 3.0)
+        .collect()
+}
+
 /// Validation relMSE: ½ · mean (x − y)² / (y² + 0.01) on linear radiance (any layout; `y` is
 /// the reference).
 pub fn rel_mse_val(x: &[f32], y: &[f32]) -> f64 {
@@ -272,6 +285,23 @@ mod tests {
         let c1 = 1e-4;
         let expect = (0.12 + c1) / (0.13 + c1);
         assert!((ssim_rgb(&a, &b, w, h, 1.0) - expect).abs() < 1e-12);
+    }
+
+    /// The map is the relMSE pixel by pixel: its mean is the image's relMSE (the oracle of
+    /// `pixguide eval` relies on it to rank blocks as the page ranks images).
+    #[test]
+    fn rel_mse_map_averages_to_rel_mse() {
+        let (w, h) = (11, 6);
+        let x = ramp(w, h, |x, y, c| (x * 3 + y * 5 + c) as f32 * 0.07);
+        let y = ramp(w, h, |x, y, c| ((x + y + 2 * c) % 5) as f32 * 0.3);
+        let m = rel_mse_map(&x, &y, w, h, ToneMap::Paper);
+        assert_eq!(m.len(), w * h);
+        let mean = m.iter().sum::<f64>() / m.len() as f64;
+        let r = rel_mse(&x, &y, w, h, ToneMap::Paper, 0);
+        assert!((mean - r).abs() <= 1e-12 * r, "{mean} vs {r}");
+        // One pixel of the hand case above: 0.740267….
+        let one = rel_mse_map(&[1.0, 0.0, 0.0], &[0.5, 0.5, 0.5], 1, 1, ToneMap::Paper);
+        assert!((one[0] - 0.740267).abs() < 1e-5, "{one:?}");
     }
 
     #[test]

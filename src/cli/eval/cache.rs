@@ -42,6 +42,10 @@ pub struct Record {
     /// UTC date of the measurement and the 1-minute load average right after it.
     pub date: String,
     pub load1: f64,
+    /// Mean weight per expert over the image, keyed by the expert's name, for methods that blend
+    /// experts (a guided model's W); for a bound, the share of pixels taken from each expert.
+    /// None for the others, and in lines written before the field existed.
+    pub mean_w: Option<Vec<(String, f64)>>,
 }
 
 impl Record {
@@ -55,14 +59,18 @@ pub(super) fn key(kind: &str, scene: &str, reference: &str, spp: u32, method: &s
     format!("{kind}|{scene}@{reference}|{spp}|{method}|{weights}|{seed}|{w}x{h}")
 }
 
+fn fnv1a(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in bytes {
+        h = (h ^ *b as u64).wrapping_mul(0x100_0000_01b3);
+    }
+    h
+}
+
 /// Size and FNV-1a 64 hash of a file: changes whenever the weights do.
 pub(super) fn file_id(path: &Path) -> Result<String> {
     let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in &bytes {
-        h = (h ^ *b as u64).wrapping_mul(0x100_0000_01b3);
-    }
-    Ok(format!("{}:{h:016x}", bytes.len()))
+    Ok(format!("{}:{:016x}", bytes.len(), fnv1a(&bytes)))
 }
 
 fn read_cache(path: &Path) -> Result<HashMap<String, Record>> {
@@ -107,5 +115,48 @@ impl Cache {
         self.file.flush()?;
         self.map.insert(r.key(), r);
         Ok(())
+    }
+}
+
+/// The denoised images the bounds choose among, one EXR each (f32, ZIP-compressed: lossless, so
+/// a resumed run's bounds are those of a fresh one), named after the measurement's key. Kept
+/// apart from the page's folder (by default under target/), as the page's folder is committed
+/// and the images are tens of MB; without them a run measures the experts again.
+pub(super) struct ImageStore {
+    dir: std::path::PathBuf,
+}
+
+impl ImageStore {
+    pub(super) fn new(dir: &Path) -> Result<ImageStore> {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        Ok(ImageStore { dir: dir.to_path_buf() })
+    }
+    /// The file of an image whose measurement has key `key`: readable prefix, then a hash of the
+    /// whole key (weights, reference, seed and size included).
+    pub(super) fn path(&self, key: &str, scene: &str, spp: u32, seed: u64, name: &str) -> std::path::PathBuf {
+        let safe: String = name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect();
+        self.dir.join(format!("{scene}-{spp}spp-seed{seed}-{safe}-{:016x}.exr", fnv1a(key.as_bytes())))
+    }
+    pub(super) fn put(&self, path: &Path, w: usize, h: usize, rgb: &[f32]) -> Result<()> {
+        let plane = |c: usize| -> Vec<f32> { rgb.iter().skip(c).step_by(3).copied().collect() };
+        renderer::film::exr_io::write_rgb_planes(path, w as u32, h as u32, [plane(0), plane(1), plane(2)])
+            .with_context(|| format!("writing {}", path.display()))
+    }
+    /// The image, or None when it is missing or unreadable (then its method is measured again).
+    pub(super) fn get(&self, path: &Path, w: usize, h: usize) -> Option<Vec<f32>> {
+        if !path.exists() {
+            return None;
+        }
+        match renderer::film::exr_io::read_frame(path) {
+            Ok(f) if f.width as usize == w && f.height as usize == h => Some(f.radiance.mean),
+            Ok(f) => {
+                eprintln!("warning: {} is {}×{}, expected {w}×{h}; measured again", path.display(), f.width, f.height);
+                None
+            }
+            Err(e) => {
+                eprintln!("warning: {}: {e}; measured again", path.display());
+                None
+            }
+        }
     }
 }

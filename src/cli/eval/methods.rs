@@ -184,3 +184,11 @@ pub(super) fn methods(a: &EvalArgs) -> Result<Vec<MethodSpec>> {
     }
     Ok(out)
 }
+
+/// Mean weight per expert of a guided model's run, for the page's weight table: W_G and
+/// W_P = 1 − W_G averaged over the image, per branch.
+pub(super) fn mean_weights(wg: &denoiser::infer::BranchMaps) -> Vec<(String, f64)> {
+    let mean = |v: &[f32]| if v.is_empty() { 0.0 } else { v.iter().map(|&x| x as f64).sum::<f64>() / v.len() as f64 };
+    let (d, s) = (mean(&wg.diffuse), mean(&wg.specular));
+    vec![("D_G diffuse".into(), d), ("D_P diffuse".into(), 1.0 - d), ("D_G specular".into(), s), ("D_P specular".into(), 1.0 - s)]
+}

@@ -9,19 +9,22 @@
 
 mod cache;
 mod methods;
+mod oracle;
 mod pictures;
 mod report;
 mod scenes;
+mod spread;
 
 use super::denoise::InferArgs;
 use super::progress;
 use anyhow::{bail, Context, Result};
-use cache::{key, Cache, Record};
+use cache::{key, Cache, ImageStore, Record};
 use clap::Args;
 use denoiser::infer::{self, Denoised};
 use denoiser::metrics;
 use denoiser::preprocess::{self, PreparedImage};
 use methods::{EvalMethod, MethodSpec, BREAKDOWN_METHODS, PICTURE_METHODS};
+use oracle::BoundSpec;
 use renderer::film::Frame;
 use renderer::scene::Scene;
 use scenes::{load_scene, render, TestScene};
@@ -53,9 +56,11 @@ pub struct EvalArgs {
     /// the names `pixguide train --all` writes).
     #[arg(long, default_value = "denoiser/weights")]
     pub weights_dir: PathBuf,
-    /// Render seed of every noisy image.
-    #[arg(long, default_value_t = 4242)]
-    pub seed: u64,
+    /// Render seeds: every (scene, spp) is rendered, denoised and scored at each, and the page
+    /// gives the mean over seeds with its spread. Pictures and the runtime breakdown use the
+    /// first. (`--seed` is the same option.)
+    #[arg(long = "seeds", alias = "seed", default_value = "4242", value_delimiter = ',')]
+    pub seeds: Vec<u64>,
     /// The results page; its PNGs go to a folder beside it named after it (docs/results/).
     #[arg(long, default_value = "docs/results.md")]
     pub out: PathBuf,
@@ -63,6 +68,10 @@ pub struct EvalArgs {
     /// skips what it holds; delete it to measure everything again.
     #[arg(long)]
     pub cache: Option<PathBuf>,
+    /// Folder of the denoised images the bounds choose among (EXR, keyed like the cache), so a
+    /// resumed run need not denoise again; delete it freely.
+    #[arg(long, default_value = "target/eval-images")]
+    pub images: PathBuf,
     /// Side of the square image of the runtime breakdown (0: no breakdown).
     #[arg(long, default_value_t = 256)]
     pub breakdown_size: u32,
@@ -107,6 +116,8 @@ pub struct PictureData {
 pub struct Outcome {
     pub scenes: Vec<TestScene>,
     pub methods: Vec<MethodSpec>,
+    /// The block-oracle bounds measured (oracle.rs).
+    pub bounds: Vec<BoundSpec>,
     pub records: HashMap<String, Record>,
     pub renders: usize,
     pub measured: usize,
@@ -152,8 +163,16 @@ pub fn run(a: EvalArgs) -> Result<()> {
     if a.picture_spp.contains(&0) {
         bail!("--picture-spp: give positive sample counts");
     }
+    if a.seeds.is_empty() {
+        bail!("--seeds: give at least one render seed, e.g. 4242,4243,4244");
+    }
+    if let Some(d) = a.seeds.iter().enumerate().find_map(|(i, s)| a.seeds[..i].contains(s).then_some(s)) {
+        bail!("--seeds: {d} is given twice");
+    }
+    let seed0 = a.seeds[0];
     let scenes = scenes::scenes(&a.scenes)?;
     let methods = methods::methods(&a)?;
+    let bounds = oracle::bounds(&methods);
     let pictures = picture_scenes(&a, &scenes);
     for p in &pictures {
         if !scenes.iter().any(|s| &s.name == p) {
@@ -169,17 +188,31 @@ pub fn run(a: EvalArgs) -> Result<()> {
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let cache_path = a.cache.clone().unwrap_or_else(|| dir.join("cache.jsonl"));
     let mut cache = Cache::open(&cache_path)?;
+    let store = ImageStore::new(&a.images)?;
     let opts = a.infer.options();
     let device = denoiser::cpu_device();
 
-    // Work list: per (scene, spp) the methods to measure, and whether pictures are due.
+    // Work list: per (scene, spp, seed) the methods to measure, the bounds to score, and whether
+    // pictures are due.
     struct Job {
         scene: usize,
         spp: u32,
+        seed: u64,
         todo: Vec<usize>,
+        bounds: Vec<usize>,
         picture: bool,
     }
     let avail: Vec<usize> = (0..methods.len()).filter(|&i| methods[i].available()).collect();
+    let method_of = |name: &str| methods.iter().position(|m| m.name() == oracle::producer(name));
+    // An image a bound needs: the key of its producing method's measurement, and the file.
+    let image_path = |s: &TestScene, spp: u32, seed: u64, name: &str| -> Option<PathBuf> {
+        let m = &methods[method_of(name)?];
+        let k = key("image", &s.name, &s.reference_id, spp, name, &m.id, seed, s.width, s.height);
+        Some(store.path(&k, &s.name, spp, seed, name))
+    };
+    let bound_key = |s: &TestScene, spp: u32, seed: u64, b: &BoundSpec| {
+        key("quality", &s.name, &s.reference_id, spp, &b.name, &b.id, seed, s.width, s.height)
+    };
     let mut jobs = Vec::new();
     let mut cached = 0usize;
     for (si, s) in scenes.iter().enumerate() {
@@ -189,41 +222,57 @@ pub fn run(a: EvalArgs) -> Result<()> {
         spps.sort_unstable();
         spps.dedup();
         for spp in spps {
-            let in_table = a.spp.contains(&spp);
-            let picture = is_pic && a.picture_spp.contains(&spp);
-            let wanted: Vec<usize> = avail
-                .iter()
-                .copied()
-                .filter(|&i| {
-                    let k = methods[i].kind;
-                    k == EvalMethod::Noisy || in_table || (picture && PICTURE_METHODS.contains(&k))
-                })
-                .collect();
-            let uncached = |i: usize| {
-                cache
-                    .get(&key("quality", &s.name, &s.reference_id, spp, methods[i].name(), &methods[i].id, a.seed, s.width, s.height))
-                    .is_none()
-            };
-            // Pictures are redrawn when a file is missing, or when a picture method is measured
-            // anew (new weights, or a method new to the page such as OIDN), whose panel would
-            // otherwise be stale or absent.
-            let redraw = picture
-                && (picture_paths(&dir, &s.name, spp).iter().any(|p| !p.exists())
-                    || wanted.iter().any(|&i| PICTURE_METHODS.contains(&methods[i].kind) && uncached(i)));
-            let todo: Vec<usize> = wanted
-                .iter()
-                .copied()
-                .filter(|&i| {
-                    // Pictures need the images, which the cache does not keep: every picture
-                    // method is measured again for a redraw.
-                    (redraw && PICTURE_METHODS.contains(&methods[i].kind)) || uncached(i)
-                })
-                .collect();
-            cached += wanted.len() - todo.len();
-            if !todo.is_empty() {
-                // Every picture method is in `todo` when pictures are drawn, so they are never
-                // drawn from a partial set.
-                jobs.push(Job { scene: si, spp, todo, picture: redraw });
+            for &seed in &a.seeds {
+                let in_table = a.spp.contains(&spp);
+                let picture = is_pic && a.picture_spp.contains(&spp) && seed == seed0;
+                let wanted: Vec<usize> = avail
+                    .iter()
+                    .copied()
+                    .filter(|&i| {
+                        let k = methods[i].kind;
+                        k == EvalMethod::Noisy || in_table || (picture && PICTURE_METHODS.contains(&k))
+                    })
+                    .collect();
+                let uncached = |i: usize| {
+                    cache
+                        .get(&key("quality", &s.name, &s.reference_id, spp, methods[i].name(), &methods[i].id, seed, s.width, s.height))
+                        .is_none()
+                };
+                let job_bounds: Vec<usize> = if in_table {
+                    (0..bounds.len()).filter(|&b| cache.get(&bound_key(s, spp, seed, &bounds[b])).is_none()).collect()
+                } else {
+                    Vec::new()
+                };
+                // A bound to score whose expert image is not stored has its producer measured again.
+                let mut need_image = Vec::new();
+                for &b in &job_bounds {
+                    for e in &bounds[b].experts {
+                        if image_path(s, spp, seed, e).is_none_or(|p| !p.exists()) {
+                            need_image.extend(method_of(e));
+                        }
+                    }
+                }
+                // Pictures are redrawn when a file is missing, or when a picture method is measured
+                // anew (new weights, or a method new to the page such as OIDN), whose panel would
+                // otherwise be stale or absent.
+                let redraw = picture
+                    && (picture_paths(&dir, &s.name, spp).iter().any(|p| !p.exists())
+                        || wanted.iter().any(|&i| PICTURE_METHODS.contains(&methods[i].kind) && uncached(i)));
+                let todo: Vec<usize> = wanted
+                    .iter()
+                    .copied()
+                    .filter(|&i| {
+                        // Pictures need the images, which the cache does not keep: every picture
+                        // method is measured again for a redraw.
+                        (redraw && PICTURE_METHODS.contains(&methods[i].kind)) || uncached(i) || need_image.contains(&i)
+                    })
+                    .collect();
+                cached += wanted.len() - todo.len() + (if in_table { bounds.len() - job_bounds.len() } else { 0 });
+                if !todo.is_empty() || !job_bounds.is_empty() {
+                    // Every picture method is in `todo` when pictures are drawn, so they are never
+                    // drawn from a partial set.
+                    jobs.push(Job { scene: si, spp, seed, todo, bounds: job_bounds, picture: redraw });
+                }
             }
         }
     }
@@ -239,7 +288,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
                     spp,
                     methods[g].name(),
                     &methods[g].id,
-                    a.seed,
+                    seed0,
                     a.breakdown_size,
                     a.breakdown_size,
                 );
@@ -252,7 +301,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         }
     }
 
-    let steps: usize = jobs.iter().map(|j| j.todo.len()).sum::<usize>() + breakdown_todo.len();
+    let steps: usize = jobs.iter().map(|j| j.todo.len() + j.bounds.len()).sum::<usize>() + breakdown_todo.len();
     let pb = progress::bar(steps as u64, "eval");
     if a.quiet {
         pb.set_draw_target(indicatif::ProgressDrawTarget::hidden());
@@ -297,12 +346,12 @@ pub fn run(a: EvalArgs) -> Result<()> {
             if (desc && !with_desc) || (!desc && !plain) {
                 continue;
             }
-            pb.set_message(format!("{} {} spp render", s.name, job.spp));
-            let (mut frame, render_s) = render(scene, job.spp, a.seed, desc)?;
+            pb.set_message(format!("{} {} spp seed {} render", s.name, job.spp, job.seed));
+            let (mut frame, render_s) = render(scene, job.spp, job.seed, desc)?;
             renders += 1;
             if let Some((_, first, ..)) = inputs.first() {
                 if first.radiance.mean != frame.radiance.mean {
-                    bail!("{} at {} spp, seed {}: the render with path descriptors differs from the one without; descriptor recording must not change the samples", s.name, job.spp, a.seed);
+                    bail!("{} at {} spp, seed {}: the render with path descriptors differs from the one without; descriptor recording must not change the samples", s.name, job.spp, job.seed);
                 }
             }
             let tp = Instant::now();
@@ -311,6 +360,9 @@ pub fn run(a: EvalArgs) -> Result<()> {
             let prepare_s = tp.elapsed().as_secs_f64();
             inputs.push((desc, frame, render_s, prepared, prepare_s));
         }
+        // This job's images that bounds choose among, by image name.
+        let mut kept: HashMap<String, Vec<f32>> = HashMap::new();
+        let is_expert = |name: &str| job.bounds.iter().any(|&b| bounds[b].experts.iter().any(|e| e == name));
         for &i in &job.todo {
             let m = &methods[i];
             let (_, frame, render_s, prepared, prepare_s) = inputs.iter().find(|x| x.0 == m.needs_descriptors()).expect("rendered above");
@@ -321,7 +373,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 spp: job.spp,
                 method: m.name().to_string(),
                 weights: m.id.clone(),
-                seed: a.seed,
+                seed: job.seed,
                 width: s.width,
                 height: s.height,
                 render_s: *render_s,
@@ -351,10 +403,19 @@ pub fn run(a: EvalArgs) -> Result<()> {
                     let t = &d.timings;
                     (r.gather_s, r.d_g_s, r.d_p_s, r.e_s, r.readback_s) = (t.gather_s, t.d_g_s, t.d_p_s, t.e_s, t.readback_s);
                     image = d.radiance;
+                    r.mean_w = d.weights_g.as_ref().map(methods::mean_weights);
                     wg = d.weights_g;
                 }
             }
             let e = metrics::evaluate(&image, refr, w, h, metrics::DEFAULT_BORDER);
+            // Every stored image is one a bound of the page may need: a later run with the same
+            // weights then scores its bounds without denoising again.
+            if bounds.iter().any(|b| b.experts.iter().any(|e| e == m.name())) {
+                if let Some(p) = image_path(s, job.spp, job.seed, m.name()) {
+                    store.put(&p, w, h, &image)?;
+                }
+            }
+            let keep = is_expert(m.name());
             (r.rel_mse, r.rel_mse_gamma, r.one_minus_ssim) = (e.rel_mse, e.rel_mse_gamma, e.one_minus_ssim);
             r.date = super::train::iso_date_utc();
             r.load1 = load1();
@@ -368,6 +429,9 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 r.one_minus_ssim,
                 r.time_s
             ));
+            if keep {
+                kept.insert(m.name().to_string(), image.clone());
+            }
             if let Some(p) = picture.as_mut() {
                 if PICTURE_METHODS.contains(&m.kind) {
                     p.images.push((m.kind, image, r.rel_mse));
@@ -383,6 +447,52 @@ pub fn run(a: EvalArgs) -> Result<()> {
         if let Some(p) = picture {
             pictures::write_pictures(&dir, &p)?;
         }
+        for &b in &job.bounds {
+            let bound = &bounds[b];
+            pb.set_message(format!("{} {} spp seed {} {}", s.name, job.spp, job.seed, bound.name));
+            let mut images = Vec::new();
+            for e in &bound.experts {
+                let img = match kept.remove(e) {
+                    Some(v) => v,
+                    None => image_path(s, job.spp, job.seed, e)
+                        .and_then(|p| store.get(&p, w, h))
+                        .with_context(|| format!("{}: no image of {e} for {} at {} spp, seed {}", bound.name, s.name, job.spp, job.seed))?,
+                };
+                images.push(img);
+            }
+            let refs: Vec<&[f32]> = images.iter().map(|v| v.as_slice()).collect();
+            let o = oracle::block_oracle(&refs, refr, w, h, oracle::BLOCK)?;
+            let e = metrics::evaluate(&o.image, refr, w, h, metrics::DEFAULT_BORDER);
+            // Put the images back for the next bound over the same experts.
+            for (name, img) in bound.experts.iter().zip(images) {
+                kept.insert(name.clone(), img);
+            }
+            let r = Record {
+                kind: "quality".into(),
+                scene: s.name.clone(),
+                reference: s.reference_id.clone(),
+                spp: job.spp,
+                method: bound.name.clone(),
+                weights: bound.id.clone(),
+                seed: job.seed,
+                width: s.width,
+                height: s.height,
+                rel_mse: e.rel_mse,
+                rel_mse_gamma: e.rel_mse_gamma,
+                one_minus_ssim: e.one_minus_ssim,
+                mean_w: Some(bound.experts.iter().cloned().zip(o.share).collect()),
+                date: super::train::iso_date_utc(),
+                load1: load1(),
+                ..Default::default()
+            };
+            say(format!(
+                "{} {:>2} spp {:<14} relMSE {:.5}  1-SSIM {:.5}  (bound, uses the reference)",
+                s.name, job.spp, bound.name, r.rel_mse, r.one_minus_ssim
+            ));
+            cache.put(r)?;
+            measured += 1;
+            pb.inc(1);
+        }
     }
 
     if !breakdown_todo.is_empty() {
@@ -392,7 +502,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         for &(g, spp) in &breakdown_todo {
             let m = &methods[g];
             pb.set_message(format!("breakdown {} {spp} spp", m.name()));
-            let (mut frame, render_s) = render(&scene, spp, a.seed, m.needs_descriptors())?;
+            let (mut frame, render_s) = render(&scene, spp, seed0, m.needs_descriptors())?;
             renders += 1;
             let mut r = Record {
                 kind: "breakdown".into(),
@@ -400,7 +510,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 spp,
                 method: m.name().to_string(),
                 weights: m.id.clone(),
-                seed: a.seed,
+                seed: seed0,
                 width: size,
                 height: size,
                 render_s,
@@ -439,6 +549,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
     let outcome = Outcome {
         scenes,
         methods,
+        bounds,
         records: cache.map,
         renders,
         measured,

@@ -1,8 +1,10 @@
 //! docs/results.md and its plots, from the measurements of `pixguide eval`; the pictures it
-//! shows are drawn by pictures.rs.
+//! shows are drawn by pictures.rs, the sections on the bounds, the spread over render seeds and
+//! the experts' weights by spread.rs.
 
-use super::cache::Record;
+use super::cache::{key, Record};
 use super::methods::{EvalMethod, MethodSpec, BREAKDOWN_METHODS};
+use super::oracle::BLOCK;
 use super::pictures::ZOOM;
 use super::scenes::TestScene;
 use super::{picture_paths, picture_scenes, EvalArgs, Outcome, NORM_SPP};
@@ -11,25 +13,25 @@ use anyhow::{Context, Result};
 use std::fmt::Write as _;
 use std::path::Path;
 
-fn mean(v: &[f64]) -> Option<f64> {
+pub(super) fn mean(v: &[f64]) -> Option<f64> {
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }
 
 /// Which value of a record a table or plot shows.
 #[derive(Clone, Copy)]
-enum Metric {
+pub(super) enum Metric {
     RelMse,
     Ssim,
 }
 
 impl Metric {
-    fn of(self, r: &Record) -> f64 {
+    pub(super) fn of(self, r: &Record) -> f64 {
         match self {
             Metric::RelMse => r.rel_mse,
             Metric::Ssim => r.one_minus_ssim,
         }
     }
-    fn name(self) -> &'static str {
+    pub(super) fn name(self) -> &'static str {
         match self {
             Metric::RelMse => "relMSE",
             Metric::Ssim => "1−SSIM",
@@ -37,36 +39,104 @@ impl Metric {
     }
 }
 
-struct View<'a> {
-    a: &'a EvalArgs,
-    o: &'a Outcome,
+/// A row of the tables: a method, or a block-oracle bound over some methods' outputs.
+pub(super) struct Row<'a> {
+    /// Name in the cache keys.
+    pub name: &'a str,
+    pub label: String,
+    /// Label in plots.
+    pub short: String,
+    /// Identity of the weights the records were measured with.
+    pub id: &'a str,
+    pub bound: bool,
+    pub missing: Option<&'a str>,
+}
+
+/// Every method (available or not), then every bound.
+pub(super) fn rows(o: &Outcome) -> Vec<Row<'_>> {
+    let mut out: Vec<Row> = o
+        .methods
+        .iter()
+        .map(|m| Row {
+            name: m.name(),
+            label: m.label().into(),
+            short: m.label().into(),
+            id: &m.id,
+            bound: false,
+            missing: m.missing.as_deref(),
+        })
+        .collect();
+    out.extend(o.bounds.iter().map(|b| Row {
+        name: &b.name,
+        label: b.label(),
+        short: b.short_label(),
+        id: &b.id,
+        bound: true,
+        missing: None,
+    }));
+    out
+}
+
+pub(super) struct View<'a> {
+    pub a: &'a EvalArgs,
+    pub o: &'a Outcome,
 }
 
 impl View<'_> {
-    fn rec(&self, scene: &TestScene, spp: u32, m: &MethodSpec) -> Option<&Record> {
-        self.o.quality(&scene.name, spp, m, self.a.seed, scene)
+    pub(super) fn rec(&self, scene: &TestScene, spp: u32, r: &Row, seed: u64) -> Option<&Record> {
+        self.o.records.get(&key("quality", &scene.name, &scene.reference_id, spp, r.name, r.id, seed, scene.width, scene.height))
     }
     fn noisy(&self) -> &MethodSpec {
         &self.o.methods[0]
     }
-    /// The scene's error normalised by its 2-spp noisy error.
-    fn norm(&self, scene: &TestScene, spp: u32, m: &MethodSpec, metric: Metric) -> Option<f64> {
-        let base = metric.of(self.rec(scene, NORM_SPP, self.noisy())?);
-        let v = metric.of(self.rec(scene, spp, m)?);
+    /// The scene's error normalised by its 2-spp noisy error of the same seed.
+    fn norm(&self, scene: &TestScene, spp: u32, r: &Row, metric: Metric, seed: u64) -> Option<f64> {
+        let n = self.noisy();
+        let base = metric.of(self.o.quality(&scene.name, NORM_SPP, n, seed, scene)?);
+        let v = metric.of(self.rec(scene, spp, r, seed)?);
         (base > 0.0).then(|| v / base)
     }
-    /// Mean over scenes of the raw and of the normalised value (scenes lacking it are left out).
-    fn means(&self, spp: u32, m: &MethodSpec, metric: Metric) -> (Option<f64>, Option<f64>) {
-        let raw: Vec<f64> = self.o.scenes.iter().filter_map(|s| self.rec(s, spp, m).map(|r| metric.of(r))).collect();
-        let norm: Vec<f64> = self.o.scenes.iter().filter_map(|s| self.norm(s, spp, m, metric)).collect();
+    /// Mean over scenes of the raw and of the normalised value at one seed (scenes lacking it
+    /// are left out).
+    fn seed_means(&self, spp: u32, r: &Row, metric: Metric, seed: u64) -> (Option<f64>, Option<f64>) {
+        let raw: Vec<f64> = self.o.scenes.iter().filter_map(|s| self.rec(s, spp, r, seed).map(|x| metric.of(x))).collect();
+        let norm: Vec<f64> = self.o.scenes.iter().filter_map(|s| self.norm(s, spp, r, metric, seed)).collect();
         (mean(&raw), mean(&norm))
     }
-    fn mean_time(&self, spp: u32, m: &MethodSpec) -> Option<f64> {
-        mean(&self.o.scenes.iter().filter_map(|s| self.rec(s, spp, m).map(|r| r.time_s)).collect::<Vec<_>>())
+    /// [`Self::seed_means`] averaged over the seeds that have it.
+    fn means(&self, spp: u32, r: &Row, metric: Metric) -> (Option<f64>, Option<f64>) {
+        let per: Vec<(Option<f64>, Option<f64>)> = self.a.seeds.iter().map(|&seed| self.seed_means(spp, r, metric, seed)).collect();
+        (mean(&per.iter().filter_map(|p| p.0).collect::<Vec<_>>()), mean(&per.iter().filter_map(|p| p.1).collect::<Vec<_>>()))
+    }
+    /// Mean over scenes at each seed, only where every scene has it (so that seeds compare).
+    pub(super) fn complete_seed_means(&self, spp: u32, r: &Row, metric: Metric) -> Vec<Option<f64>> {
+        self.a
+            .seeds
+            .iter()
+            .map(|&seed| {
+                let v: Option<Vec<f64>> = self.o.scenes.iter().map(|s| self.rec(s, spp, r, seed).map(|x| metric.of(x))).collect();
+                mean(&v?)
+            })
+            .collect()
+    }
+    /// One scene's raw and normalised value, each averaged over the seeds that have it.
+    fn scene_means(&self, scene: &TestScene, spp: u32, r: &Row, metric: Metric) -> (Option<f64>, Option<f64>) {
+        let raw: Vec<f64> = self.a.seeds.iter().filter_map(|&seed| self.rec(scene, spp, r, seed).map(|x| metric.of(x))).collect();
+        let norm: Vec<f64> = self.a.seeds.iter().filter_map(|&seed| self.norm(scene, spp, r, metric, seed)).collect();
+        (mean(&raw), mean(&norm))
+    }
+    fn mean_time(&self, spp: u32, r: &Row) -> Option<f64> {
+        let t: Vec<f64> = self
+            .a
+            .seeds
+            .iter()
+            .flat_map(|&seed| self.o.scenes.iter().filter_map(move |s| self.rec(s, spp, r, seed).map(|x| x.time_s)))
+            .collect();
+        mean(&t)
     }
 }
 
-fn f(v: Option<f64>, digits: usize) -> String {
+pub(super) fn f(v: Option<f64>, digits: usize) -> String {
     v.map(|x| format!("{x:.digits$}")).unwrap_or_else(|| "–".into())
 }
 
@@ -90,7 +160,11 @@ fn command_line() -> String {
 pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
     let v = View { a, o };
     let rel = dir.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    let avail: Vec<&MethodSpec> = o.methods.iter().filter(|m| m.available()).collect();
+    let all = rows(o);
+    // Rows with measurements: the available methods and the bounds.
+    let avail: Vec<&Row> = all.iter().filter(|r| r.missing.is_none()).collect();
+    let timed: Vec<&Row> = avail.iter().copied().filter(|r| !r.bound).collect();
+    let seeds = a.seeds.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(", ");
     let mut spps = a.spp.clone();
     spps.sort_unstable();
     spps.dedup();
@@ -131,14 +205,14 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
     writeln!(w, "## Protocol\n")?;
     writeln!(
         w,
-        "Each test scene of `{}` ({}) is rendered at its reference's size with seed {} at {} spp and scored against its 8000-spp reference \
+        "Each test scene of `{}` ({}) is rendered at its reference's size with {} at {} spp and scored against its 8000-spp reference \
          (`references/` beside the list). relMSE = mean over pixels and channels of (x−y)²/(y²+10⁻⁴) and 1−SSIM (7×7 uniform window, data range 1), both after \
          tone map (a) of method.md §7.3 (c/(1+lum(c)/1.5), then ^(1/2.2), clipped), over the whole image (no border crop: tiled inference mirror-pads the \
          image, so border pixels are denoised too) — the numbers `pixguide render --reference` prints. **norm.** = the value divided by the same scene's \
          {NORM_SPP}-spp noisy error, then averaged over scenes (the paper's Table 2 convention, method.md §7.3).\n",
         a.scenes.display(),
         o.scenes.iter().map(|s| format!("{} {}×{}", s.name, s.width, s.height)).collect::<Vec<_>>().join(", "),
-        a.seed,
+        if a.seeds.len() == 1 { format!("seed {seeds}") } else { format!("each of the render seeds {seeds}") },
         spps.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(", ")
     )?;
     writeln!(
@@ -155,6 +229,24 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
          the first time (a Python venv at `target/oidn-venv`, `pip install {}`: the wheel ships the C library) and calls its C API in process; \
          Python is only the installer.\n",
         crate::cli::oidn_setup::PACKAGE
+    )?;
+    if a.seeds.len() > 1 {
+        writeln!(
+            w,
+            "With {} render seeds, every value below is the mean over the seeds of the value at each seed (a mean over scenes, or one \
+             scene's); the section on the spread over seeds gives how much it varies from one seed to the next.\n",
+            a.seeds.len()
+        )?;
+    }
+    writeln!(
+        w,
+        "**Bounds** (rows and curves named *bound*) are not methods: they use the reference. For each {BLOCK}×{BLOCK} block of the image \
+         (the last ones cut by its edge) a bound keeps the pixels of whichever of its experts' outputs has the lower error against the \
+         reference over that block — the error being this page's relMSE (after tone map (a)) restricted to the block; ties go to the \
+         expert listed first — and the image so assembled is scored like every method, relMSE and 1−SSIM over the whole image. It \
+         says how much a per-pixel choice among those outputs, such as the guided model's E makes, could gain at most at that \
+         granularity. The choice minimises relMSE, not 1−SSIM: the seams between blocks from different experts can make a bound's \
+         1−SSIM higher than that of its best expert.\n"
     )?;
     writeln!(w, "| method | weights | status |\n|---|---|---|")?;
     for m in &o.methods {
@@ -193,12 +285,12 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
             writeln!(w, "\nThe same, raw (mean over scenes of the unnormalised errors):\n")?;
         }
         header(w)?;
-        for m in &o.methods {
+        for m in &all {
             if let Some(why) = &m.missing {
-                writeln!(w, "| {} | not available ({why}) |", m.label())?;
+                writeln!(w, "| {} | not available ({why}) |", m.label)?;
                 continue;
             }
-            write!(w, "| {} |", m.label())?;
+            write!(w, "| {} |", m.label)?;
             for &spp in &spps {
                 for metric in [Metric::RelMse, Metric::Ssim] {
                     let (raw, norm) = v.means(spp, m, metric);
@@ -209,13 +301,16 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
         }
     }
 
-    // Plots.
+    super::spread::write(w, &v, &all)?;
+
+    // Plots (the bounds on the spp plot only: they take no time of their own).
     let curves = |metric: Metric, by_time: bool| -> Vec<Curve> {
         avail
             .iter()
             .enumerate()
+            .filter(|(_, m)| !(by_time && m.bound))
             .map(|(k, m)| Curve {
-                label: m.label().to_string(),
+                label: m.short.clone(),
                 colour: k,
                 points: spps
                     .iter()
@@ -245,7 +340,11 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
         ("1 − SSIM / 2-spp noisy", &curves(Metric::Ssim, true)),
     )?;
     writeln!(w, "\n## Error against samples per pixel and against time\n")?;
-    writeln!(w, "Mean normalised error, log-log; one curve per method, plain Monte Carlo included (the paper's Fig. 4 and Fig. 10).\n")?;
+    writeln!(
+        w,
+        "Mean normalised error, log-log; one curve per method, plain Monte Carlo included (the paper's Fig. 4 and Fig. 10), and on the \
+         error-against-spp plot the bounds, which use the reference.\n"
+    )?;
     writeln!(w, "![error vs spp]({rel}/error-vs-spp.png)\n\n![error vs time]({rel}/error-vs-time.png)\n")?;
     writeln!(w, "Mean time per image (seconds: render + preprocessing + inference):\n")?;
     write!(w, "| method |")?;
@@ -253,8 +352,8 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
         write!(w, " {spp} spp |")?;
     }
     writeln!(w, "\n|---|{}", "---|".repeat(spps.len()))?;
-    for m in &avail {
-        write!(w, "| {} |", m.label())?;
+    for m in &timed {
+        write!(w, "| {} |", m.label)?;
         for &spp in &spps {
             write!(w, " {} |", f(v.mean_time(spp, m), 2))?;
         }
@@ -275,7 +374,7 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
         let size = a.breakdown_size;
         writeln!(
             w,
-            "Wall seconds on {1} rendered at {size}×{size}, for {0}. The guided model renders with descriptors; D_P includes the path-manifold modules; \
+            "Wall seconds on {1} rendered at {size}×{size} (the first seed), for {0}. The guided model renders with descriptors; D_P includes the path-manifold modules; \
              E + blend includes recombining the two branches; tiling = cutting windows out of the prepared image and reading results back; columns \
              of the two branches (diffuse, specular) are summed. OIDN renders without descriptors; its filter = OIDN's RT filter, commit + execute.\n",
             shown.iter().map(|m| m.label()).collect::<Vec<_>>().join(" and "),
@@ -290,7 +389,7 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
                         && r.scene == o.breakdown_scene
                         && r.spp == spp
                         && r.weights == m.id
-                        && r.seed == a.seed
+                        && r.seed == a.seeds[0]
                         && r.width == size
                         && r.height == size
                 });
@@ -326,7 +425,8 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
     writeln!(w, "\n## Per scene\n")?;
     writeln!(
         w,
-        "Each cell: raw error (normalised by the scene's {NORM_SPP}-spp noisy error). The mean row averages each over the scenes.\n"
+        "Each cell: raw error (normalised by the scene's {NORM_SPP}-spp noisy error). The mean row averages each over the scenes. \
+         Bounds use the reference.\n"
     )?;
     for metric in [Metric::RelMse, Metric::Ssim] {
         writeln!(w, "### {}\n", metric.name())?;
@@ -334,14 +434,14 @@ pub fn write(a: &EvalArgs, o: &Outcome, dir: &Path) -> Result<()> {
             writeln!(w, "{spp} spp\n")?;
             write!(w, "| scene |")?;
             for m in &avail {
-                write!(w, " {} |", m.label())?;
+                write!(w, " {} |", m.label)?;
             }
             writeln!(w, "\n|---|{}", "---|".repeat(avail.len()))?;
             for sc in &o.scenes {
                 write!(w, "| {} |", sc.name)?;
                 for m in &avail {
-                    let raw = v.rec(sc, spp, m).map(|r| metric.of(r));
-                    write!(w, " {} ({}) |", f(raw, 4), f(v.norm(sc, spp, m, metric), 3))?;
+                    let (raw, norm) = v.scene_means(sc, spp, m, metric);
+                    write!(w, " {} ({}) |", f(raw, 4), f(norm, 3))?;
                 }
                 writeln!(w)?;
             }
