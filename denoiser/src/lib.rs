@@ -33,6 +33,7 @@
 pub mod names;
 
 pub mod column;
+pub mod engine;
 pub mod ensemble;
 pub mod infer;
 pub mod kernel;
