@@ -47,6 +47,10 @@ pub struct BenchDenoiseArgs {
     /// Render seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Instead: time single 3×3 convolutions (layer sizes of the g column) on the engine at each
+    /// instruction set and on burn, interleaved, and print GMAC/s and ratios.
+    #[arg(long)]
+    pub conv: bool,
 }
 
 /// One configuration measured: a model, and for our networks where they run.
@@ -107,6 +111,9 @@ pub fn run(a: BenchDenoiseArgs) -> Result<()> {
         Isa::detect().name(),
         load.split_whitespace().take(3).collect::<Vec<_>>().join(" ")
     );
+    if a.conv {
+        return conv_bench(a.repeat.max(3));
+    }
     let mut entries = Vec::new();
     for &m in &a.models {
         match m {
@@ -253,4 +260,47 @@ fn report(entries: &[Entry], mp: f64) {
             );
         }
     }
+}
+
+/// Single 3×3 convolutions with bias and ReLU on random data: the engine at each instruction set
+/// against burn's conv2d, each layer's implementations run in turn `repeat` times, medians.
+fn conv_bench(repeat: u32) -> Result<()> {
+    use burn::tensor::{Tensor, TensorData};
+    use denoiser::engine::{conv, ConvWeights, Planes};
+    let d = denoiser::cpu_device();
+    // (height, width, in, out): g's level-0 block and decoder input, level 2, the bottleneck.
+    let layers = [(384, 512, 24, 24), (384, 512, 56, 24), (96, 128, 112, 48), (24, 32, 80, 80)];
+    println!("{:<22} {:>10} {:>10} {:>10}", "layer h×w cin→cout", "impl", "GMAC/s", "× burn");
+    for (h, w, cin, cout) in layers {
+        let mut rng = denoiser::rng::SplitMix64::new(1);
+        let mut r = |n: usize| -> Vec<f32> { (0..n).map(|_| rng.symmetric(1.0)).collect() };
+        let (x, wt, b) = (r(cin * h * w), r(cout * cin * 9), r(cout));
+        let macs = (h * w * cin * cout * 9) as f64;
+        let xt = Tensor::<4>::from_data(TensorData::new(x.clone(), [1, cin, h, w]), &d);
+        let wtt = Tensor::<4>::from_data(TensorData::new(wt.clone(), [cout, cin, 3, 3]), &d);
+        let bt = Tensor::<1>::from_data(TensorData::new(b.clone(), [cout]), &d);
+        let planes = Planes::from_planar(&x, cin, h, w);
+        let cw = ConvWeights::new(&wt, &b, cout, cin, 3);
+        let isas = Isa::available();
+        let mut times = vec![Vec::new(); isas.len() + 1];
+        for _ in 0..repeat {
+            for (i, &isa) in isas.iter().enumerate() {
+                let t = Instant::now();
+                std::hint::black_box(conv(isa, &[&planes], &cw, true));
+                times[i].push(t.elapsed().as_secs_f64());
+            }
+            let t = Instant::now();
+            let y = burn::tensor::module::conv2d(xt.clone(), wtt.clone(), Some(bt.clone()), burn::tensor::ops::ConvOptions::new([1, 1], [1, 1], [1, 1], 1));
+            let y = burn::tensor::activation::relu(y).into_data();
+            std::hint::black_box(y);
+            times[isas.len()].push(t.elapsed().as_secs_f64());
+        }
+        let burn_t = median(&times[isas.len()]);
+        let names: Vec<&str> = isas.iter().map(|i| i.name()).chain(["burn"]).collect();
+        for (name, t) in names.iter().zip(&times) {
+            let m = median(t);
+            println!("{:<22} {:>10} {:>10.1} {:>10.2}", format!("{h}×{w} {cin}→{cout}"), name, macs / m / 1e9, burn_t / m);
+        }
+    }
+    Ok(())
 }

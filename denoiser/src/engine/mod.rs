@@ -78,8 +78,8 @@ impl Isa {
 fn conv_weights(c: &Conv) -> ConvWeights {
     let w = c.effective_weight();
     let [cout, cin, k, _] = w.dims();
-    let w: Vec<f32> = w.into_data().convert::<f32>().to_vec().expect("f32 weights");
-    let b: Vec<f32> = c.bias.val().into_data().convert::<f32>().to_vec().expect("f32 biases");
+    let w: Vec<f32> = w.into_data().convert::<f32>().try_to_vec::<f32>().expect("f32 weights");
+    let b: Vec<f32> = c.bias.val().into_data().convert::<f32>().try_to_vec::<f32>().expect("f32 biases");
     assert_eq!(c.padding, k / 2, "the engine runs same-padded convolutions");
     ConvWeights::new(&w, &b, cout, cin, k)
 }
@@ -166,7 +166,7 @@ impl UnetEngine {
     /// [`Self::heads`] on a `[B, C, H, W]` tensor, as `[B, C_s, H_s, W_s]` tensors.
     pub fn head_tensors(&self, x: Tensor<4>, device: &Device) -> Vec<Tensor<4>> {
         let [b, c, h, w] = x.dims();
-        let v: Vec<f32> = x.into_data().convert::<f32>().to_vec().expect("f32 input");
+        let v: Vec<f32> = x.into_data().convert::<f32>().try_to_vec::<f32>().expect("f32 input");
         let per_item: Vec<Vec<Planes>> = (0..b).map(|i| self.heads(&Planes::from_planar(&v[i * c * h * w..(i + 1) * c * h * w], c, h, w))).collect();
         (0..self.heads.len())
             .map(|s| {

@@ -49,7 +49,7 @@ fn convolution_equals_burn() {
             Some(Tensor::from_data(TensorData::new(bias.clone(), [cout]), &d)),
             ConvOptions::new([1, 1], [k / 2, k / 2], [1, 1], 1),
         );
-        let expect: Vec<f32> = burn::tensor::activation::relu(expect).into_data().to_vec().unwrap();
+        let expect: Vec<f32> = burn::tensor::activation::relu(expect).into_data().try_to_vec::<f32>().unwrap();
         let cw = ConvWeights::new(&wt, &bias, cout, cin, k);
         let (pa, pb) = (Planes::from_planar(&xa, ca, h, w), Planes::from_planar(&xb, cb, h, w));
         for isa in Isa::available() {
@@ -75,10 +75,10 @@ fn pooling_and_upsampling_equal_burn() {
     let v = random(c * h * w, &mut rng);
     let t = Tensor::<4>::from_data(TensorData::new(v.clone(), [1, c, h, w]), &d);
     let p = Planes::from_planar(&v, c, h, w);
-    let pooled: Vec<f32> = max_pool2d(t.clone(), MaxPoolOptions::new([2, 2]).with_stride([2, 2])).into_data().to_vec().unwrap();
+    let pooled: Vec<f32> = max_pool2d(t.clone(), MaxPoolOptions::new([2, 2]).with_stride([2, 2])).into_data().try_to_vec::<f32>().unwrap();
     assert_eq!(p.max_pool().to_planar(0, c), pooled);
     let up = interpolate(t, InterpolateOptions::new(InterpolateMode::Bilinear).with_align_corners(false).with_output_size([23, 15]));
-    let up: Vec<f32> = up.into_data().to_vec().unwrap();
+    let up: Vec<f32> = up.into_data().try_to_vec::<f32>().unwrap();
     assert_eq!(p.upsample_to(23, 15).to_planar(0, c), up);
 }
 
@@ -139,8 +139,8 @@ fn hostile_inputs_give_finite_outputs() {
     let specials = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e30, -1e30, 0.0, 0.5];
     let v: Vec<f32> = (0..c * h * w).map(|i| specials[(i * 7 + i / 13) % specials.len()]).collect();
     let x = Tensor::<4>::from_data(TensorData::new(v, [1, c, h, w]), &d);
-    let a: Vec<f32> = col_e.forward(x.clone(), 4).into_data().to_vec().unwrap();
+    let a: Vec<f32> = col_e.forward(x.clone(), 4).into_data().try_to_vec::<f32>().unwrap();
     assert!(a.iter().all(|v| v.is_finite()), "non-finite engine output");
-    let b: Vec<f32> = col.forward(x, 4).into_data().to_vec().unwrap();
+    let b: Vec<f32> = col.forward(x, 4).into_data().try_to_vec::<f32>().unwrap();
     close(&a, &b, "hostile input");
 }
