@@ -209,7 +209,12 @@ impl Entry {
                 stages.push(profile::Stage { name: "E, blend, recombine".into(), seconds: tm.e_s, macs: e_macs, calls: 1 });
                 stages.push(profile::Stage { name: "preprocess".into(), seconds: run.prepare_s, macs: 0.0, calls: 1 });
                 let listed: f64 = stages.iter().map(|st| st.seconds).sum();
-                stages.push(profile::Stage { name: "other (tiling, readback, …)".into(), seconds: (s - listed).max(0.0), macs: 0.0, calls: 1 });
+                stages.push(profile::Stage {
+                    name: "other (tiling, readback, …)".into(),
+                    seconds: (s - listed).max(0.0),
+                    macs: 0.0,
+                    calls: 1,
+                });
                 self.secs.push(s);
                 self.stages = stages;
             }
@@ -224,10 +229,7 @@ impl Entry {
 fn report(entries: &[Entry], mp: f64) {
     let oidn = entries.iter().find(|e| matches!(e.run, Runner::Oidn(_))).map(|e| median(&e.secs));
     let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
-    println!(
-        "{:<18} {:>8} {:>8} {:>8} {:>10} {:>12} {:>10}",
-        "model", "time [s]", "s/MP", "× OIDN", "VmHWM MiB", "+above MiB", "heap MiB"
-    );
+    println!("{:<18} {:>8} {:>8} {:>8} {:>10} {:>12} {:>10}", "model", "time [s]", "s/MP", "× OIDN", "VmHWM MiB", "+above MiB", "heap MiB");
     for e in entries {
         let t = median(&e.secs);
         let ratio = oidn.map_or("-".to_string(), |o| format!("{:.1}", t / o));
@@ -290,7 +292,12 @@ fn conv_bench(repeat: u32) -> Result<()> {
                 times[i].push(t.elapsed().as_secs_f64());
             }
             let t = Instant::now();
-            let y = burn::tensor::module::conv2d(xt.clone(), wtt.clone(), Some(bt.clone()), burn::tensor::ops::ConvOptions::new([1, 1], [1, 1], [1, 1], 1));
+            let y = burn::tensor::module::conv2d(
+                xt.clone(),
+                wtt.clone(),
+                Some(bt.clone()),
+                burn::tensor::ops::ConvOptions::new([1, 1], [1, 1], [1, 1], 1),
+            );
             let y = burn::tensor::activation::relu(y).into_data();
             std::hint::black_box(y);
             times[isas.len()].push(t.elapsed().as_secs_f64());

@@ -96,8 +96,10 @@ pub fn conv(isa: Isa, inputs: &[&Planes], wts: &ConvWeights, relu: bool) -> Plan
         let ptr = ptr;
         for xt in (0..w).step_by(X_TILE) {
             // Input rows of the top tap: padded row y + 1 − k/2, padded column x + 1 − k/2.
-            let srcs: Vec<(*const f32, usize, usize)> =
-                inputs.iter().map(|p| (p.data[p.at(0, y, xt)..].as_ptr().wrapping_sub((k / 2) * (p.stride + 1)), p.plane_len(), p.c)).collect();
+            let srcs: Vec<(*const f32, usize, usize)> = inputs
+                .iter()
+                .map(|p| (p.data[p.at(0, y, xt)..].as_ptr().wrapping_sub((k / 2) * (p.stride + 1)), p.plane_len(), p.c))
+                .collect();
             for b in 0..wts.blocks() {
                 let wb = &wts.packed[b * wts.cin * k * k * COB..(b + 1) * wts.cin * k * k * COB];
                 let bias = &wts.bias[b * COB..(b + 1) * COB];
@@ -204,7 +206,13 @@ mod x86 {
             }
         }
         let m0: __mmask16 = if n >= 16 { 0xffff } else { (1u32 << n) as u16 - 1 };
-        let m1: __mmask16 = if n >= 32 { 0xffff } else if n > 16 { (1u32 << (n - 16)) as u16 - 1 } else { 0 };
+        let m1: __mmask16 = if n >= 32 {
+            0xffff
+        } else if n > 16 {
+            (1u32 << (n - 16)) as u16 - 1
+        } else {
+            0
+        };
         let zero = _mm512_setzero_ps();
         for (j, a) in acc.iter().enumerate() {
             let o = row.outs[j];

@@ -167,7 +167,8 @@ impl UnetEngine {
     pub fn head_tensors(&self, x: Tensor<4>, device: &Device) -> Vec<Tensor<4>> {
         let [b, c, h, w] = x.dims();
         let v: Vec<f32> = x.into_data().convert::<f32>().try_to_vec::<f32>().expect("f32 input");
-        let per_item: Vec<Vec<Planes>> = (0..b).map(|i| self.heads(&Planes::from_planar(&v[i * c * h * w..(i + 1) * c * h * w], c, h, w))).collect();
+        let per_item: Vec<Vec<Planes>> =
+            (0..b).map(|i| self.heads(&Planes::from_planar(&v[i * c * h * w..(i + 1) * c * h * w], c, h, w))).collect();
         (0..self.heads.len())
             .map(|s| {
                 let (cs, hs, ws) = (per_item[0][s].c, per_item[0][s].h, per_item[0][s].w);

@@ -107,7 +107,11 @@ fn rendered(scene: &str, w: u32, h: u32, spp: u32) -> film::Frame {
 fn shipped_g_equals_burn() {
     let d = cpu_device();
     let loaded = weights::load(&weights::default_path(Method::G), &d).expect("shipped g weights");
-    for (scene, w, h, spp) in [("scenes/glossy-room/scene.toml", 61, 47, 2), ("scenes/cornell-box/scene.toml", 45, 39, 8), ("scenes/glossy-room/scene.toml", 33, 53, 32)] {
+    for (scene, w, h, spp) in [
+        ("scenes/glossy-room/scene.toml", 61, 47, 2),
+        ("scenes/cornell-box/scene.toml", 45, 39, 8),
+        ("scenes/glossy-room/scene.toml", 33, 53, 32),
+    ] {
         let mut frame = rendered(scene, w, h, spp);
         let noisy = frame.radiance.mean.clone();
         let prepared = prepare_for_inference(&mut frame).unwrap();
