@@ -93,7 +93,8 @@ pub fn conv(isa: Isa, inputs: &[&Planes], wts: &ConvWeights, relu: bool) -> Plan
     let k = wts.k;
     let run = isa.run();
     (0..h).into_par_iter().for_each(|y| {
-        let ptr = ptr;
+        // The whole wrapper, not its field, goes into the closure (edition-2021 captures).
+        let out_ptr = ptr;
         for xt in (0..w).step_by(X_TILE) {
             // Input rows of the top tap: padded row y + 1 − k/2, padded column x + 1 − k/2.
             let srcs: Vec<(*const f32, usize, usize)> = inputs
@@ -110,7 +111,7 @@ pub fn conv(isa: Isa, inputs: &[&Planes], wts: &ConvWeights, relu: bool) -> Plan
                         let co = b * COB + j;
                         if co < wts.cout {
                             // SAFETY: inside `out.data`; rows are written by this task only.
-                            unsafe { ptr.0.add(co * out_plane + (y + 1) * out_stride + x + 1) }
+                            unsafe { out_ptr.0.add(co * out_plane + (y + 1) * out_stride + x + 1) }
                         } else {
                             std::ptr::null_mut()
                         }
@@ -161,18 +162,18 @@ unsafe fn run_scalar<const K: usize>(row: &Row, n: usize) {
                         let w = &row.wts[wi..wi + COB];
                         // A plain multiply and add, not `mul_add`: without FMA in the build
                         // that is a library call per term (0.2 GMAC/s measured).
-                        for j in 0..COB {
-                            acc[j] += v * w[j];
+                        for (a, &wj) in acc.iter_mut().zip(w) {
+                            *a += v * wj;
                         }
                         wi += COB;
                     }
                 }
             }
         }
-        for j in 0..COB {
-            if !row.outs[j].is_null() {
-                let v = acc[j] + row.bias[j];
-                unsafe { *row.outs[j].add(i) = if row.relu { v.max(0.0) } else { v } };
+        for ((&o, &a), &b) in row.outs.iter().zip(&acc).zip(row.bias) {
+            if !o.is_null() {
+                let v = a + b;
+                unsafe { *o.add(i) = if row.relu { v.max(0.0) } else { v } };
             }
         }
     }
