@@ -27,6 +27,9 @@ enum Command {
     Render(cli::render::RenderArgs),
     /// Measure the integrator against Mitsuba 3, the BVH against Embree, and buffer costs; prints ratios against baselines run in the same process.
     Bench(cli::bench::BenchArgs),
+    /// Time g, p, guided (on the inference engine and on burn) and Open Image Denoise on one
+    /// rendered frame: s/MP, ratio to OIDN, peak resident memory, per-stage GMAC/s.
+    BenchDenoise(cli::bench_denoise::BenchDenoiseArgs),
     /// Write a procedural sky (Preetham + sun) environment map to EXR.
     Sky(cli::sky::SkyArgs),
     /// Generate randomized training shots with references (resumable).
@@ -75,6 +78,7 @@ fn main() {
     let result = match args.command {
         Command::Render(a) => cli::render::run(a),
         Command::Bench(a) => cli::bench::run(a),
+        Command::BenchDenoise(a) => cli::bench_denoise::run(a),
         Command::Sky(a) => cli::sky::run(a),
         Command::Dataset(a) => cli::dataset::run(a),
         Command::Reference(a) => cli::reference::run(a),

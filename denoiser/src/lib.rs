@@ -34,6 +34,7 @@
 pub mod names;
 
 pub mod column;
+pub mod engine;
 pub mod ensemble;
 pub mod gate;
 pub mod infer;

@@ -53,8 +53,16 @@ pub struct DenoiseArgs {
 pub fn run(a: DenoiseArgs) -> Result<()> {
     // Weights first: a missing file should not cost the time of reading a large frame.
     let (loaded, gated) = match a.model {
-        Model::Net(m) => (Some(load_weights(m, a.weights.as_deref())?), None),
-        Model::Gated(k) => (None, Some(super::gated::load(k, a.weights.as_deref())?)),
+        Model::Net(m) => {
+            let mut loaded = load_weights(m, a.weights.as_deref())?;
+            a.infer.inference.apply(&mut loaded);
+            (Some(loaded), None)
+        }
+        Model::Gated(k) => {
+            let mut gated = super::gated::load(k, a.weights.as_deref())?;
+            gated.use_inference(&a.infer.inference);
+            (None, Some(gated))
+        }
         Model::Oidn => return run_oidn(&a),
     };
     let mut frame = film::exr_io::read_frame(&a.frame).with_context(|| format!("reading {}", a.frame.display()))?;

@@ -120,8 +120,11 @@ impl GatedDenoiser {
         &self.gate.header.experts
     }
 
-    pub fn needs_descriptors(&self) -> bool {
-        self.experts().contains(&Expert::P)
+    /// Runs the network experts' convolutions where `inference` says.
+    pub fn use_inference(&mut self, inference: &super::shared::Inference) {
+        for l in [self.g.as_mut(), self.p.as_mut()].into_iter().flatten() {
+            inference.apply(l);
+        }
     }
 
     pub fn run(&self, frame: &mut Frame, opts: &InferOptions) -> Result<GatedRun> {

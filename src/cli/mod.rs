@@ -1,4 +1,5 @@
 pub mod bench;
+pub mod bench_denoise;
 pub mod bench_mitsuba;
 pub mod calibrate;
 pub mod checkpoint;

@@ -119,8 +119,16 @@ pub fn run(a: RenderArgs) -> Result<()> {
     // Weights (or OIDN) before the render, so that a missing file costs nothing.
     let loaded = match a.denoise.0 {
         None => None,
-        Some(Model::Net(m)) => Some(Denoiser::Net(Box::new(dn::load_weights(m, a.weights.as_deref())?))),
-        Some(Model::Gated(k)) => Some(Denoiser::Gated(Box::new(super::gated::load(k, a.weights.as_deref())?))),
+        Some(Model::Net(m)) => {
+            let mut loaded = dn::load_weights(m, a.weights.as_deref())?;
+            a.infer.inference.apply(&mut loaded);
+            Some(Denoiser::Net(Box::new(loaded)))
+        }
+        Some(Model::Gated(k)) => {
+            let mut gated = super::gated::load(k, a.weights.as_deref())?;
+            gated.use_inference(&a.infer.inference);
+            Some(Denoiser::Gated(Box::new(gated)))
+        }
         Some(Model::Oidn) => {
             if a.weights.is_some() {
                 anyhow::bail!("--weights does not apply to --denoise oidn (OIDN brings its own weights)");

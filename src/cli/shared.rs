@@ -24,6 +24,33 @@ pub struct InferArgs {
     /// Tiles per network pass.
     #[arg(long, default_value_t = 1)]
     pub batch: usize,
+    /// Where the networks' convolutions run: `engine` (direct kernels for this CPU's AVX-512,
+    /// AVX2 or portable code; docs/inference-engine.md) or `burn` (the training framework's
+    /// forward, the engine's reference). Both give the same image to f32 rounding.
+    #[arg(long, default_value = "engine")]
+    pub inference: Inference,
+}
+
+/// See [`InferArgs::inference`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Inference {
+    Engine,
+    Burn,
+}
+
+impl Inference {
+    pub fn name(self) -> &'static str {
+        match self {
+            Inference::Engine => "engine",
+            Inference::Burn => "burn",
+        }
+    }
+
+    /// Sets the loaded model's columns to run where `self` says.
+    pub fn apply(self, loaded: &mut Loaded) {
+        let isa = (self == Inference::Engine).then(denoiser::engine::Isa::detect);
+        denoiser::engine::use_engine(&mut loaded.model, isa);
+    }
 }
 
 impl InferArgs {

@@ -166,6 +166,12 @@ pub struct GuideLevel {
 }
 
 impl GuideLevel {
+    /// Multiply-accumulates of one tap's distance, as `MsKpConfig::macs_per_pixel` counts them.
+    pub(super) fn macs_per_tap(&self) -> u64 {
+        let c = self.x.dims()[1] as u64;
+        c + 1 + if self.var.is_some() { 2 * c + 3 } else { 0 }
+    }
+
     /// The next coarser level: 2×2 box means, whose variance is a quarter of the mean variance
     /// (independent pixels).
     pub(super) fn down(&self) -> Self {

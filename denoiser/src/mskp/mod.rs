@@ -271,6 +271,7 @@ impl MsKpConfig {
             low_pass_swap: self.compositor == ScaleCompositor::LowPassSwap,
             guides: self.guides.clone(),
             guide_gain_exponent: self.guide_gain_exponent,
+            engine: None,
         }
     }
 }
@@ -291,6 +292,10 @@ pub struct MsKpNet {
     /// [`MsKpConfig::guide_gain_exponent`].
     #[module(skip)]
     pub guide_gain_exponent: f64,
+    /// When set, [`Self::heads`] runs on the inference engine instead of burn (same weights,
+    /// same result to f32 rounding; `MethodModel::use_engine`). Never set while training.
+    #[module(skip)]
+    pub engine: Option<crate::engine::SharedUnet>,
 }
 
 /// One scale's head outputs: kernel logits `[B, k², h, w]`, the blend logit `[B, 1, h, w]`
@@ -359,16 +364,33 @@ impl MsKpNet {
         out.into_iter().map(|f| f.expect("a decoder level per kernel scale")).collect()
     }
 
+    /// Multiply-accumulates of [`Self::heads`] on one `h × w` input (pooling floors odd sizes).
+    pub fn conv_macs(&self, h: usize, w: usize) -> u64 {
+        let px = |l: usize| ((h >> l) * (w >> l)) as u64;
+        let conv = |layer: &Conv| {
+            let [o, i, k, _] = layer.weight.dims();
+            (o * i * k * k) as u64
+        };
+        let stacks = self.down.iter().enumerate().chain(self.up.iter().enumerate());
+        let convs: u64 = stacks.map(|(l, s)| px(l) * s.layers.iter().map(conv).sum::<u64>()).sum();
+        convs + self.heads.iter().enumerate().map(|(s, hd)| px(s) * conv(hd)).sum::<u64>()
+    }
+
     /// Head outputs per scale, finest first.
     pub fn heads(&self, x: Tensor<4>) -> Vec<HeadOutput> {
         let scales = self.heads.len();
         let guides = self.guides.len();
-        self.features(x)
+        let outputs: Vec<Tensor<4>> = match &self.engine {
+            Some(e) => {
+                let device = x.device();
+                e.head_tensors(x, &device)
+            }
+            None => self.features(x).into_iter().zip(&self.heads).map(|(f, head)| head.forward(f)).collect(),
+        };
+        outputs
             .into_iter()
-            .zip(&self.heads)
             .enumerate()
-            .map(|(s, (f, head))| {
-                let o = head.forward(f);
+            .map(|(s, o)| {
                 let c = o.dims()[1] - guides;
                 let guide_strength = (guides > 0).then(|| o.clone().narrow(1, c, guides));
                 if s + 1 < scales {
@@ -393,7 +415,12 @@ impl MsKpNet {
         let mut out: Option<Tensor<4>> = None;
         // The coarser level's guides, for the joint-bilateral upsampling into this one.
         let mut coarse_guides: Option<Vec<GuideLevel>> = None;
-        for ((c, g), head) in pyramid.into_iter().zip(heads).rev() {
+        let scales = heads.len();
+        for (i, ((c, g), head)) in pyramid.into_iter().zip(heads).rev().enumerate() {
+            let t = std::time::Instant::now();
+            let [b, _, ch, cw] = c.dims();
+            let taps = head.logits.dims()[1] as u64;
+            let macs = (b * ch * cw) as u64 * taps * (3 + g.iter().map(GuideLevel::macs_per_tap).sum::<u64>());
             let mut logits = head.logits;
             // Bounded so that exp stays finite; e^±12 spans any useful strength.
             let strength =
@@ -424,15 +451,21 @@ impl MsKpNet {
                 (Some(_), None) => unreachable!("only the coarsest scale lacks a blend weight"),
             });
             coarse_guides = Some(g);
+            if crate::engine::profile::active() {
+                // burn flex runs eagerly, so the time around the ops is theirs.
+                let s = scales - 1 - i;
+                crate::engine::profile::record(&format!("kernel application s{s}"), t.elapsed().as_secs_f64(), macs as f64);
+            }
         }
         out.expect("at least one kernel scale")
     }
 
     /// `[B, C_in, H, W]` (sanitised) at `spp` samples per pixel → `[B, 3, H−2m, W−2m]`.
     pub fn forward(&self, input: Tensor<4>, spp: usize) -> Tensor<4> {
-        let [_, _, h, w] = input.dims();
-        let heads = self.heads(input.clone());
-        let guides = guide_features(&input, &self.guides, spp);
+        let [b, _, h, w] = input.dims();
+        let conv_macs = (b as u64 * self.conv_macs(h, w)) as f64;
+        let heads = crate::engine::profile::timed(|| "convolutions".into(), conv_macs, || self.heads(input.clone()));
+        let guides = crate::engine::profile::timed(|| "guide features".into(), 0.0, || guide_features(&input, &self.guides, spp));
         let out = Self::composite(input.narrow(1, 0, 3), guides, heads, self.low_pass_swap, guide_gain(self.guide_gain_exponent, spp));
         center_crop(out, h - 2 * self.margin, w - 2 * self.margin)
     }
