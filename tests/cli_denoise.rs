@@ -53,7 +53,7 @@ fn render_and_denoise_in_one_process() {
             "2",
             "-q",
             "--denoise",
-            "guided",
+            "guided-joint",
             "--weights",
             s(&weights),
             "-o",
@@ -93,7 +93,8 @@ fn denoise_command_on_an_aovs_frame() {
     for m in [Method::Guided, Method::G] {
         let w = tiny_weights(&d, m);
         let out = d.join(format!("{}.exr", m.name()));
-        let stdout = ok(&pixguide(&["denoise", s(&frame), "--model", m.name(), "--weights", s(&w), "-o", s(&out)]), "denoise");
+        let model = if m == Method::Guided { "guided-joint" } else { m.name() };
+        let stdout = ok(&pixguide(&["denoise", s(&frame), "--model", model, "--weights", s(&w), "-o", s(&out)]), "denoise");
         assert!(stdout.contains("windows"), "{stdout}");
         assert_finite_image(&out, 256, 256);
     }
@@ -144,7 +145,7 @@ fn clear_errors() {
             "1",
             "-q",
             "--denoise",
-            "guided",
+            "guided-joint",
             "--weights",
             s(&g),
             "-o",
@@ -157,4 +158,54 @@ fn clear_errors() {
     std::fs::write(&missing, b"not weights").unwrap();
     let err = failed(&pixguide(&["denoise", s(&plain), "--model", "g", "--weights", s(&missing)]), "garbage weights");
     assert!(err.contains("nope.safetensors") && err.contains("safetensors"), "{err}");
+}
+
+/// The README's main command on the shipped models: `--denoise guided` is the gate E over the
+/// shipped g and p. The output is finite and of the scene's size, the summary names both
+/// experts and their mean weights, and the weight PNG has one panel per expert.
+#[test]
+fn render_with_the_shipped_gate() {
+    let d = out_dir("cli-denoise-gate");
+    let (out, wpng) = (d.join("den.exr"), d.join("w.png"));
+    let stdout = ok(
+        &pixguide(&[
+            "render",
+            "scenes/cornell-box/scene.toml",
+            "--spp",
+            "2",
+            "--size",
+            "96x64",
+            "-q",
+            "--denoise",
+            "guided",
+            "-o",
+            s(&out),
+            "--weights-png",
+            s(&wpng),
+        ]),
+        "render --denoise guided",
+    );
+    assert!(stdout.contains("denoise (guided model: E over g, p)") && stdout.contains("mean weight g "), "{stdout}");
+    assert_finite_image(&out, 96, 64);
+    let img = image::open(&wpng).unwrap();
+    assert_eq!((img.width(), img.height()), (2 * 96 + 4, 64 + 16));
+    // A gate file is not a column's weight file, nor the other way round: clear errors.
+    let g = tiny_weights(&d, Method::G);
+    let err = failed(
+        &pixguide(&[
+            "render",
+            "scenes/cornell-box/scene.toml",
+            "--spp",
+            "1",
+            "-q",
+            "--denoise",
+            "guided",
+            "--weights",
+            s(&g),
+            "-o",
+            s(&out),
+        ]),
+        "a column's file as a gate",
+    );
+    assert!(err.contains("not a gate file"), "{err}");
 }

@@ -31,7 +31,7 @@ fn eval_tiny_configuration_writes_the_page_and_resumes() {
         "--spp",
         "2,4",
         "--methods",
-        "noisy,g,guided",
+        "noisy,g,guided-joint",
         "--breakdown-size",
         "64",
         "--pictures",
@@ -55,7 +55,7 @@ fn eval_tiny_configuration_writes_the_page_and_resumes() {
     // Noisy at 2 spp is what everything is normalised by.
     assert_eq!(&noisy[..2], ["1.000", "1.000"]);
     let g = row(&md, table, "D_G (g)");
-    let guided = row(&md, table, "guided");
+    let guided = row(&md, table, "guided, joint E");
     // The shipped weights beat the 2-spp noise on this scene by about 3× in relMSE and 5× in
     // 1−SSIM (docs/denoiser.md; seeded render, so no sampling noise in the test): "below noisy"
     // leaves that whole margin, yet fails for an identity or broken denoiser, which scores
@@ -73,9 +73,9 @@ fn eval_tiny_configuration_writes_the_page_and_resumes() {
     // method, render, preprocessing, D_G, D_P, E + blend, tiling, OIDN filter (– for guided), total.
     let bd = row(&md, "## Runtime breakdown", "2");
     assert_eq!(bd.len(), 9, "{bd:?}");
-    assert_eq!((bd[0], bd[7]), ("guided", "–"), "{bd:?}");
+    assert_eq!((bd[0], bd[7]), ("guided-joint", "–"), "{bd:?}");
     assert!(bd[1..7].iter().chain([&bd[8]]).all(|c| c.parse::<f64>().is_ok_and(|v| v >= 0.0)), "{bd:?}");
-    assert!(!md.contains("D_P (p)") && md.contains("cores (`nproc`)") && md.contains("--methods noisy,g,guided"));
+    assert!(!md.contains("D_P (p)") && md.contains("cores (`nproc`)") && md.contains("--methods noisy,g,guided-joint"));
 
     // PNGs: plots and the three picture sheets, decodable and of the documented sizes.
     let dir = base.join("out/results");
@@ -114,7 +114,7 @@ fn eval_tiny_configuration_writes_the_page_and_resumes() {
     let second = summary(&eval(&args));
     assert!(second.starts_with("eval: 0 measured, 8 cached, 0 renders"), "{second}");
     let again = std::fs::read_to_string(&out).unwrap();
-    assert_eq!(row(&again, table, "guided"), guided);
+    assert_eq!(row(&again, table, "guided, joint E"), guided);
 }
 
 #[test]

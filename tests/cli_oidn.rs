@@ -88,7 +88,9 @@ fn oidn_refuses_weights_options() {
     let o = pixguide(&["denoise", s(&d.join("none.exr")), "--model", "oidm"]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        !o.status.success() && err.contains("invalid value 'oidm'") && err.contains("[possible values: g, p, both, guided, oidn]"),
+        !o.status.success()
+            && err.contains("invalid value 'oidm'")
+            && err.contains("[possible values: g, p, both, guided, guided-oidn, guided-joint, oidn]"),
         "{err}"
     );
 }

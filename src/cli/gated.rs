@@ -47,7 +47,6 @@ impl GatedKind {
 pub struct GatedDenoiser {
     pub kind: GatedKind,
     pub gate: Gate,
-    pub file: PathBuf,
     pub g: Option<Loaded>,
     pub p: Option<Loaded>,
     pub oidn: Option<Oidn>,
@@ -72,7 +71,7 @@ pub fn load(kind: GatedKind, file: Option<&Path>) -> Result<GatedDenoiser> {
             kind.experts().iter().map(|e| e.name()).collect::<Vec<_>>()
         );
     }
-    let mut out = GatedDenoiser { kind, gate, file: path.clone(), g: None, p: None, oidn: None, oidn_load_s: 0.0 };
+    let mut out = GatedDenoiser { kind, gate, g: None, p: None, oidn: None, oidn_load_s: 0.0 };
     for (e, id) in out.gate.header.experts.clone().iter().zip(out.gate.header.expert_ids.clone()) {
         let have = match e {
             Expert::G | Expert::P => {

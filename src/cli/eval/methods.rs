@@ -20,7 +20,12 @@ pub enum EvalMethod {
     G,
     P,
     Both,
+    /// The gate E over the shipped g and p (src/cli/gated.rs).
     Guided,
+    /// The gate E over OIDN, g and p.
+    GuidedOidn,
+    /// The jointly trained guided model (E inside one weight file with its own g and p).
+    GuidedJoint,
     GuidedHalf,
     FixNTrain,
     FullNFull,
@@ -30,12 +35,14 @@ pub enum EvalMethod {
 }
 
 impl EvalMethod {
-    pub const ALL: [EvalMethod; 10] = [
+    pub const ALL: [EvalMethod; 12] = [
         EvalMethod::Noisy,
         EvalMethod::G,
         EvalMethod::P,
         EvalMethod::Both,
         EvalMethod::Guided,
+        EvalMethod::GuidedOidn,
+        EvalMethod::GuidedJoint,
         EvalMethod::GuidedHalf,
         EvalMethod::FixNTrain,
         EvalMethod::FullNFull,
@@ -50,6 +57,8 @@ impl EvalMethod {
             EvalMethod::P => "p",
             EvalMethod::Both => "both",
             EvalMethod::Guided => "guided",
+            EvalMethod::GuidedOidn => "guided-oidn",
+            EvalMethod::GuidedJoint => "guided-joint",
             EvalMethod::GuidedHalf => "guided-half",
             EvalMethod::FixNTrain => "fix-n-train",
             EvalMethod::FullNFull => "full-n-full",
@@ -65,7 +74,9 @@ impl EvalMethod {
             EvalMethod::G => "D_G (g)",
             EvalMethod::P => "D_P (p)",
             EvalMethod::Both => "both-buffers",
-            EvalMethod::Guided => "guided",
+            EvalMethod::Guided => "guided (E over g, p)",
+            EvalMethod::GuidedOidn => "guided-oidn (E over OIDN, g, p)",
+            EvalMethod::GuidedJoint => "guided, joint E",
             EvalMethod::GuidedHalf => "guided (half)",
             EvalMethod::FixNTrain => "Fix-N-Train",
             EvalMethod::FullNFull => "Full-N-Full",
@@ -74,15 +85,24 @@ impl EvalMethod {
         }
     }
 
+    /// The gated model of a guided method (a gate file over the shipped experts).
+    pub fn gated(self) -> Option<crate::cli::gated::GatedKind> {
+        match self {
+            EvalMethod::Guided => Some(crate::cli::gated::GatedKind::Guided),
+            EvalMethod::GuidedOidn => Some(crate::cli::gated::GatedKind::GuidedOidn),
+            _ => None,
+        }
+    }
+
     /// The model a learned method loads: its method, ablation and preset, which name its weight
     /// file ([`weights::file_stem`], the names `pixguide train --all` writes).
     pub fn model(self) -> Option<(Method, Option<Ablation>, Preset)> {
         match self {
-            EvalMethod::Noisy | EvalMethod::Oidn => None,
+            EvalMethod::Noisy | EvalMethod::Oidn | EvalMethod::Guided | EvalMethod::GuidedOidn => None,
             EvalMethod::G => Some((Method::G, None, Preset::Default)),
             EvalMethod::P => Some((Method::P, None, Preset::Default)),
             EvalMethod::Both => Some((Method::Both, None, Preset::Default)),
-            EvalMethod::Guided => Some((Method::Guided, None, Preset::Default)),
+            EvalMethod::GuidedJoint => Some((Method::Guided, None, Preset::Default)),
             EvalMethod::GuidedHalf => Some((Method::Guided, None, Preset::Half)),
             EvalMethod::FixNTrain => Some((Method::Guided, Some(Ablation::FixNTrain), Preset::Default)),
             EvalMethod::FullNFull => Some((Method::Guided, Some(Ablation::FullNFull), Preset::Default)),
@@ -107,11 +127,19 @@ impl clap::ValueEnum for EvalMethod {
 }
 
 /// Methods shown in the pictures, in order.
-pub const PICTURE_METHODS: [EvalMethod; 6] =
-    [EvalMethod::Noisy, EvalMethod::G, EvalMethod::P, EvalMethod::Both, EvalMethod::Guided, EvalMethod::Oidn];
+pub const PICTURE_METHODS: [EvalMethod; 8] = [
+    EvalMethod::Noisy,
+    EvalMethod::G,
+    EvalMethod::P,
+    EvalMethod::Both,
+    EvalMethod::Guided,
+    EvalMethod::GuidedOidn,
+    EvalMethod::GuidedJoint,
+    EvalMethod::Oidn,
+];
 
 /// Methods of the runtime breakdown, in its row order per spp.
-pub const BREAKDOWN_METHODS: [EvalMethod; 2] = [EvalMethod::Guided, EvalMethod::Oidn];
+pub const BREAKDOWN_METHODS: [EvalMethod; 2] = [EvalMethod::GuidedJoint, EvalMethod::Oidn];
 
 /// One evaluated method.
 pub struct MethodSpec {
@@ -122,6 +150,8 @@ pub struct MethodSpec {
     /// version and settings for OIDN.
     pub id: String,
     pub loaded: Option<Loaded>,
+    /// A guided model's gate and experts.
+    pub gated: Option<crate::cli::gated::GatedDenoiser>,
     /// The OIDN baseline's library, loaded once per run.
     pub oidn: Option<Oidn>,
     /// Why the method is not evaluated, e.g. "no denoiser/weights/both-default.safetensors".
@@ -140,7 +170,7 @@ impl MethodSpec {
         self.missing.is_none()
     }
     pub(super) fn needs_descriptors(&self) -> bool {
-        self.loaded.as_ref().is_some_and(|l| l.method.needs_descriptors())
+        self.gated.is_some() || self.loaded.as_ref().is_some_and(|l| l.method.needs_descriptors())
     }
 }
 
@@ -153,8 +183,22 @@ pub(super) fn methods(a: &EvalArgs) -> Result<Vec<MethodSpec>> {
     }
     let device = denoiser::cpu_device();
     let mut out = Vec::new();
-    let spec = |kind| MethodSpec { kind, file: None, id: String::new(), loaded: None, oidn: None, missing: None };
+    let spec = |kind| MethodSpec { kind, file: None, id: String::new(), loaded: None, gated: None, oidn: None, missing: None };
     for kind in kinds {
+        if let Some(g) = kind.gated() {
+            let file = a.weights_dir.join(g.default_path().file_name().expect("a file name"));
+            match crate::cli::gated::load(g, Some(&file)) {
+                Ok(gd) => {
+                    let id = file_id(&file)?;
+                    out.push(MethodSpec { id, gated: Some(gd), file: Some(file), ..spec(kind) });
+                }
+                Err(e) => {
+                    eprintln!("eval: leaving out {kind}: {e:#}");
+                    out.push(MethodSpec { missing: Some(format!("{e:#}")), file: Some(file), ..spec(kind) });
+                }
+            }
+            continue;
+        }
         let Some((expect, ablation, preset)) = kind.model() else {
             if kind == EvalMethod::Noisy {
                 out.push(MethodSpec { id: "mc".into(), ..spec(kind) });

@@ -42,13 +42,14 @@ pub struct EvalArgs {
     #[arg(long, default_value = "2,4,8,16,32,64", value_delimiter = ',')]
     pub spp: Vec<u32>,
     /// Methods: noisy (plain Monte Carlo, always measured: it normalises the errors), g, p, both,
-    /// guided, guided-half, fix-n-train, full-n-full, radiance-only, oidn (Intel Open Image
+    /// guided (E over g and p), guided-oidn (E over OIDN, g and p), guided-joint (the jointly
+    /// trained model), guided-half, fix-n-train, full-n-full, radiance-only, oidn (Intel Open Image
     /// Denoise, the baseline: installed into target/oidn-venv from PyPI the first time, and left
     /// out with one line saying why if that fails).
     #[arg(
         long,
         value_enum,
-        default_value = "noisy,g,p,both,guided,guided-half,fix-n-train,full-n-full,radiance-only,oidn",
+        default_value = "noisy,g,p,both,guided,guided-oidn,guided-joint,guided-half,fix-n-train,full-n-full,radiance-only,oidn",
         value_delimiter = ','
     )]
     pub methods: Vec<EvalMethod>,
@@ -382,6 +383,28 @@ pub fn run(a: EvalArgs) -> Result<()> {
             let image: Vec<f32>;
             let mut wg = None;
             match (&m.oidn, &m.loaded) {
+                _ if m.gated.is_some() => {
+                    let g = m.gated.as_ref().expect("checked");
+                    let set = denoiser::gate::run::Experts { g: g.g.as_ref(), p: g.p.as_ref(), oidn: g.oidn.as_ref() };
+                    let td = Instant::now();
+                    let outputs = denoiser::gate::run::run_experts_prepared(frame, Some(prepared), g.experts(), &set, &opts, &device)
+                        .with_context(|| format!("denoising {} at {} spp with {}", s.name, job.spp, m.name()))?;
+                    let (radiance, weights) = denoiser::gate::run::apply(&g.gate, frame, &outputs, &device)?;
+                    r.denoise_s = td.elapsed().as_secs_f64();
+                    r.prepare_s = *prepare_s;
+                    r.time_s = render_s + prepare_s + r.denoise_s;
+                    let n = (w * h).max(1);
+                    r.mean_w = Some(
+                        g.experts()
+                            .iter()
+                            .enumerate()
+                            .map(|(k, e)| {
+                                (e.name().to_string(), weights[k * n..(k + 1) * n].iter().map(|&v| v as f64).sum::<f64>() / n as f64)
+                            })
+                            .collect(),
+                    );
+                    image = radiance;
+                }
                 (Some(o), _) => {
                     let d = super::oidn_setup::denoise_timed(o, frame, &mut oidn_warm)
                         .with_context(|| format!("denoising {} at {} spp with OIDN", s.name, job.spp))?;
@@ -435,7 +458,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
             if let Some(p) = picture.as_mut() {
                 if PICTURE_METHODS.contains(&m.kind) {
                     p.images.push((m.kind, image, r.rel_mse));
-                    if m.kind == EvalMethod::Guided {
+                    if m.kind == EvalMethod::GuidedJoint {
                         p.weights_g = wg;
                     }
                 }
