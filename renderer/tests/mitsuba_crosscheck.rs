@@ -23,7 +23,7 @@
 
 use renderer::film::BufferRequest;
 use renderer::integrator::{self, RenderOptions};
-use renderer::scene::{export_mitsuba, Scene};
+use renderer::scene::{export_mitsuba, MaterialKind, Scene};
 use renderer::stats::{sidak, t_threshold, t_two_sided_p};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -66,11 +66,33 @@ struct Case {
     max_depth: u32,
 }
 
-fn render_ours(case: &Case) -> Image {
+/// Rough plastic coats of exported scenes are capped at this GGX/Beckmann alpha. Mitsuba's
+/// `roughplastic` lets light through its coat by the single-scattering microfacet
+/// transmittance T(μ), ours by 1 − E(μ) (E the coat lobe's directional albedo: energy the
+/// single-scattering lobe loses goes to the base), so our diffuse lobe is brighter by
+/// (1 − E(μi))(1 − E(μo))/(T(μi) T(μo)): measured 9.5 % at α = 0.5 at normal incidence and up to
+/// 30 % over a surface lit at grazing angles (sunlit-ruins' plinth), but within the bounds at
+/// α ≤ 0.1 (the `plastics` scene, Mitsuba's default α). No Mitsuba BSDF has our coat, so the
+/// comparison caps α (on both sides, the same scene) rather than widening every bound.
+const PLASTIC_ALPHA_CAP: f32 = 0.1;
+
+/// The scene of a case, at the case's size, as both renderers see it.
+fn load_case(case: &Case) -> Scene {
     let mut scene = Scene::load(&case.ours).unwrap_or_else(|e| panic!("{}: {e}", case.name));
     // A new size keeps the field of view along the scene's fov axis, as Mitsuba's film does.
     scene.camera.width = case.width;
     scene.camera.height = case.height;
+    if case.mitsuba.is_none() {
+        for m in &mut scene.materials {
+            if let MaterialKind::Plastic { roughness, .. } = &mut m.kind {
+                *roughness = roughness.min(PLASTIC_ALPHA_CAP);
+            }
+        }
+    }
+    scene
+}
+
+fn render_ours(case: &Case, scene: &Scene) -> Image {
     let opts = RenderOptions {
         spp: case.spp,
         seed: 1,
@@ -80,7 +102,7 @@ fn render_ours(case: &Case) -> Image {
         crop: None,
         first_sample: 0,
     };
-    let (frame, stats) = integrator::render(&scene, &opts, &|_| {}).unwrap_or_else(|e| panic!("{}: {e}", case.name));
+    let (frame, stats) = integrator::render(scene, &opts, &|_| {}).unwrap_or_else(|e| panic!("{}: {e}", case.name));
     assert_eq!(frame.nonfinite_samples, 0, "{}: non-finite samples", case.name);
     Image {
         width: frame.width,
@@ -210,17 +232,12 @@ fn family(a: &Image, b: &Image, block: u32) -> Family {
 }
 
 fn check_case(python: &Path, case: &Case, out_dir: &Path) -> (String, Vec<String>) {
+    let scene = load_case(case);
     let xml = match &case.mitsuba {
         Some(p) => p.clone(),
-        None => {
-            let scene = Scene::load(&case.ours).unwrap();
-            let mut scene = scene;
-            scene.camera.width = case.width;
-            scene.camera.height = case.height;
-            export_mitsuba(&scene, &out_dir.join(case.name)).unwrap_or_else(|e| panic!("{}: {e}", case.name))
-        }
+        None => export_mitsuba(&scene, &out_dir.join(case.name)).unwrap_or_else(|e| panic!("{}: {e}", case.name)),
     };
-    let ours = render_ours(case);
+    let ours = render_ours(case, &scene);
     write_image(&ours, &out_dir.join(format!("{}-ours.bin", case.name)), case.spp, 1);
     let theirs = render_mitsuba(python, &xml, case, out_dir);
     assert_eq!((ours.width, ours.height), (theirs.width, theirs.height));
@@ -326,18 +343,26 @@ fn cases() -> Vec<Case> {
     let xml = |name: &str| ws.join(format!("renderer/tests/mitsuba-scenes/{name}.xml"));
     let own =
         |name: &'static str, width, height, spp| Case { name, ours: xml(name), mitsuba: Some(xml(name)), width, height, spp, max_depth: 6 };
+    // The test scenes of scenes/test.txt, exported as we load them (veach-ajar is Mitsuba XML).
+    let exported = |name: &'static str| Case {
+        name,
+        ours: ws.join(format!("scenes/{name}/scene.toml")),
+        mitsuba: None,
+        width: 48,
+        height: 48,
+        spp: 512,
+        max_depth: 6,
+    };
     let veach = ws.join("scenes/assets/veach-ajar/scene.xml");
     vec![
-        Case {
-            name: "cornell-box",
-            ours: ws.join("scenes/cornell-box/scene.toml"),
-            mitsuba: None,
-            width: 48,
-            height: 48,
-            spp: 512,
-            max_depth: 6,
-        },
+        exported("cornell-box"),
         Case { name: "veach-ajar", ours: veach.clone(), mitsuba: Some(veach), width: 64, height: 36, spp: 512, max_depth: 6 },
+        exported("primitives"),
+        exported("sunlit-ruins"),
+        exported("wire-fence"),
+        exported("glass-still-life"),
+        exported("frosted-plastic"),
+        exported("glossy-room"),
         own("metals", 48, 48, 512),
         own("glass", 48, 48, 512),
         own("plastics", 48, 48, 512),

@@ -36,7 +36,7 @@
 //! Negative, NaN or infinite texels (and a negative or non-finite `scale`) count as 0.
 
 use super::distribution::Distribution2D;
-use super::Environment;
+use super::{Environment, EnvironmentView};
 use crate::math::PI;
 use crate::sampling::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
 use glam::{Vec2, Vec3};
@@ -131,6 +131,16 @@ impl EnvLight {
                     dist,
                     mean_luminance,
                 }))
+            }
+        }
+    }
+
+    pub fn view(&self) -> EnvironmentView<'_> {
+        match self {
+            EnvLight::Black => EnvironmentView::Black,
+            EnvLight::Constant(c) => EnvironmentView::Constant(*c),
+            EnvLight::Map(m) => {
+                EnvironmentView::Map { width: m.width, height: m.height, texels: &m.texels, cos_rot: m.cos_rot, sin_rot: m.sin_rot }
             }
         }
     }

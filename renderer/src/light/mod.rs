@@ -35,6 +35,15 @@ pub enum Environment {
     Map { image: Texture, rotation_deg: f32, scale: f32 },
 }
 
+/// The environment as the lights hold it: sanitised, with the map's `scale` applied (what a
+/// scene exporter writes out; `light::environment` documents the map's convention).
+pub enum EnvironmentView<'a> {
+    Black,
+    Constant(Vec3),
+    /// `texels` row-major from the zenith row; `d_world = R_y(α) · d_map` with cos α, sin α.
+    Map { width: usize, height: usize, texels: &'a [Vec3], cos_rot: f32, sin_rot: f32 },
+}
+
 /// A sampled point on a light, as seen from a shading point.
 #[derive(Clone, Copy, Debug)]
 pub struct LightSample {
@@ -184,6 +193,11 @@ impl Lights {
         let Some(&li) = self.prim_to_light.get(prim as usize) else { return 0.0 };
         let (Some(light), Some(&pmf)) = (self.triangles.get(li as usize), self.select_pmf.get(li as usize)) else { return 0.0 };
         light.connect(p, p_light, n_light, pmf).map_or(0.0, |(_, _, pdf)| pdf)
+    }
+
+    /// The environment light, as rendered.
+    pub fn environment(&self) -> EnvironmentView<'_> {
+        self.env.view()
     }
 
     /// Radiance of the environment along world direction `dir` (pointing away from the scene).
