@@ -355,8 +355,16 @@ fn check_case(python: &Path, case: &Case, out_dir: &Path) -> (String, Vec<String
 fn cases() -> Vec<Case> {
     let ws = workspace();
     let xml = |name: &str| ws.join(format!("renderer/tests/mitsuba-scenes/{name}.xml"));
-    let own =
-        |name: &'static str, width, height, spp| Case { name, ours: xml(name), mitsuba: Some(xml(name)), width, height, spp, max_depth: 6, lift: None };
+    let own = |name: &'static str, width, height, spp| Case {
+        name,
+        ours: xml(name),
+        mitsuba: Some(xml(name)),
+        width,
+        height,
+        spp,
+        max_depth: 6,
+        lift: None,
+    };
     // The test scenes of scenes/test.txt, exported as we load them (veach-ajar is Mitsuba XML).
     let exported = |name: &'static str| Case {
         name,
@@ -402,7 +410,16 @@ fn matches_mitsuba_pixel_by_pixel() {
         for p in extra.split(',') {
             let name: &'static str = Box::leak(Path::new(p).file_stem().unwrap().to_string_lossy().into_owned().into_boxed_str());
             let depth = std::env::var("PIXGUIDE_MITSUBA_DEPTH").ok().and_then(|d| d.parse().ok()).unwrap_or(6);
-            cases.push(Case { name, ours: p.into(), mitsuba: Some(p.into()), width: 32, height: 32, spp: 512, max_depth: depth, lift: None });
+            cases.push(Case {
+                name,
+                ours: p.into(),
+                mitsuba: Some(p.into()),
+                width: 32,
+                height: 32,
+                spp: 512,
+                max_depth: depth,
+                lift: None,
+            });
         }
     }
     for case in cases {

@@ -41,7 +41,13 @@ pub enum EnvironmentView<'a> {
     Black,
     Constant(Vec3),
     /// `texels` row-major from the zenith row; `d_world = R_y(α) · d_map` with cos α, sin α.
-    Map { width: usize, height: usize, texels: &'a [Vec3], cos_rot: f32, sin_rot: f32 },
+    Map {
+        width: usize,
+        height: usize,
+        texels: &'a [Vec3],
+        cos_rot: f32,
+        sin_rot: f32,
+    },
 }
 
 /// A sampled point on a light, as seen from a shading point.
