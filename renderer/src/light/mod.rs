@@ -159,9 +159,8 @@ impl Lights {
             return None;
         }
         if i == self.triangles.len() {
-            let (wi, pdf) = self.env.sample(u)?;
+            let (wi, pdf, radiance) = self.env.sample(u)?;
             let pdf = pmf * pdf;
-            let radiance = self.env.radiance(wi);
             // A direction between texels can filter to black: not worth a shadow ray.
             let useful = pdf > 0.0 && pdf.is_finite() && radiance.max_element() > 0.0 && wi.is_finite();
             return useful.then_some(LightSample { wi, dist: f32::INFINITY, radiance, pdf, prim: None });
@@ -209,6 +208,13 @@ impl Lights {
     /// Radiance of the environment along world direction `dir` (pointing away from the scene).
     pub fn env_radiance(&self, dir: Vec3) -> Vec3 {
         self.env.radiance(dir)
+    }
+
+    /// `env_radiance(dir)` and, if `want_pdf`, `env_pdf(dir)` (else 0), for the price of one.
+    pub fn env_radiance_pdf(&self, dir: Vec3, want_pdf: bool) -> (Vec3, f32) {
+        let pmf = self.env_pmf();
+        let (radiance, pdf) = self.env.radiance_pdf(dir, want_pdf && pmf > 0.0);
+        (radiance, if pmf > 0.0 { pmf * pdf } else { 0.0 })
     }
 
     /// Density (solid angle, selection included) with which `sample` picks environment direction `dir`.
