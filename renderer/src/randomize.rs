@@ -1,4 +1,4 @@
-//! Per-shot randomisation for training data (issue 4, method.md §7.1): camera, material
+//! Per-shot randomisation for training data (method.md §7.1): camera, material
 //! parameters and textures, emitters' strength and colour, and the environment, all drawn from
 //! one seed so a shot can be regenerated exactly.
 //!

@@ -450,3 +450,57 @@ fn strict_loading_refuses_substitutions_by_line() {
     assert!(Scene::load(&aniso).is_ok());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Every test and training scene (scenes/test.txt, scenes/train.txt) is written out by the
+/// Mitsuba exporter: one BSDF per material in use, of the type its kind maps to, and the
+/// environment as the scene has it. (Whether Mitsuba then renders the same image is the
+/// network-tier cross-check's business, for the test scenes.)
+#[test]
+fn every_shipped_scene_exports_to_mitsuba() {
+    use renderer::light::EnvironmentView;
+    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    let out = std::env::temp_dir().join(format!("pixguide-export-{}", std::process::id()));
+    let mut count = 0;
+    for list in ["test.txt", "train.txt"] {
+        let text = std::fs::read_to_string(scenes.join(list)).unwrap();
+        for line in text.lines().map(str::trim).filter(|l| !l.is_empty() && !l.starts_with('#')) {
+            let path = scenes.join(line);
+            if path.extension().is_some_and(|e| e == "xml") {
+                continue;
+            }
+            let scene = Scene::load(&path).unwrap_or_else(|e| panic!("{line}: {e}"));
+            let dir = out.join(line.replace('/', "_"));
+            let xml = renderer::scene::export_mitsuba(&scene, &dir).unwrap_or_else(|e| panic!("{line}: {e}"));
+            let text = std::fs::read_to_string(&xml).unwrap();
+            for (mi, m) in scene.materials.iter().enumerate() {
+                if !scene.mesh.material.contains(&(mi as u32)) {
+                    continue;
+                }
+                let def =
+                    text.lines().find(|l| l.contains(&format!("id=\"m{mi}\""))).unwrap_or_else(|| panic!("{line}: no BSDF for {}", m.name));
+                let ty = match m.kind {
+                    MaterialKind::Lambert { .. } => "diffuse\"",
+                    MaterialKind::Conductor { .. } => "conductor\"",
+                    MaterialKind::Dielectric { .. } => "dielectric\"",
+                    MaterialKind::Plastic { .. } => "plastic\"",
+                };
+                assert!(def.contains(ty), "{line}: material {} is not a {ty} BSDF: {def}", m.name);
+            }
+            let env = match scene.lights.environment() {
+                EnvironmentView::Black => None,
+                EnvironmentView::Constant(_) => Some("constant"),
+                EnvironmentView::Map { .. } => Some("envmap"),
+            };
+            assert_eq!(env.is_some(), text.contains("<emitter type=\"constant\"") || text.contains("<emitter type=\"envmap\""), "{line}");
+            if let Some(ty) = env {
+                assert!(text.contains(&format!("<emitter type=\"{ty}\"")), "{line}: no {ty} emitter");
+            }
+            if env == Some("envmap") {
+                assert!(dir.join("envmap.exr").is_file(), "{line}: no envmap.exr");
+            }
+            count += 1;
+        }
+    }
+    std::fs::remove_dir_all(&out).ok();
+    assert!(count >= 30, "only {count} scenes exported");
+}

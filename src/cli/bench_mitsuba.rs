@@ -1,5 +1,5 @@
 //! `pixguide bench`'s integrator section: our paths/s against Mitsuba 3's on the same scene and
-//! settings, run by run alternating in one process (issue 14). Mitsuba runs in a Python child
+//! settings, run by run alternating in one process. Mitsuba runs in a Python child
 //! (tools/mitsuba/bench.py) that stays alive between runs, so its one-time JIT compilation is
 //! done once, untimed, before the first timed run.
 
@@ -219,10 +219,18 @@ fn setup_mitsuba(scene_path: &Path, scene: &Scene, s: &Settings) -> Option<Mitsu
     }
 }
 
+/// What `integrator_vs_mitsuba` measured: our best paths/s and, when Mitsuba ran, ours/Mitsuba
+/// best against best and the median of the run-by-run pairs.
+pub struct VsMitsuba {
+    pub ours_paths_per_sec: f64,
+    pub best_ratio: Option<f64>,
+    pub median_ratio: Option<f64>,
+}
+
 /// Our paths/s and Mitsuba's on `scene_path` with the settings of `s`, alternating run by run
 /// (best of `s.repeat` each), with the ratio; Mitsuba is left out when `mitsuba` is false or it
 /// cannot be set up.
-pub fn integrator_vs_mitsuba(scene_path: &Path, s: &Settings, mitsuba: bool) -> Result<()> {
+pub fn integrator_vs_mitsuba(scene_path: &Path, s: &Settings, mitsuba: bool) -> Result<VsMitsuba> {
     if s.spp == 0 {
         bail!("--integrator-spp must be at least 1");
     }
@@ -324,6 +332,7 @@ pub fn integrator_vs_mitsuba(scene_path: &Path, s: &Settings, mitsuba: bool) -> 
     }
     let (secs, rays) = ours_best.ok_or_else(|| anyhow!("no run"))?;
     let ours = paths / secs;
+    let mut result = VsMitsuba { ours_paths_per_sec: ours, best_ratio: None, median_ratio: None };
     println!("  ours     {:>7.3} M paths/s ({:.2} s per render, {:.3} M rays/s)", ours * 1e-6, secs, rays as f64 / secs * 1e-6);
     if let (Some(m), Some(t)) = (&side, &theirs_best) {
         let theirs = paths / t.seconds;
@@ -334,6 +343,8 @@ pub fn integrator_vs_mitsuba(scene_path: &Path, s: &Settings, mitsuba: bool) -> 
         };
         println!("  Mitsuba  {:>7.3} M paths/s ({:.2} s per render{jit})", theirs * 1e-6, t.seconds);
         println!("  ours/Mitsuba {:.2}x ({}, wall clock, best against best)", ours / theirs, m.session.ready.variant);
+        result.best_ratio = Some(ours / theirs);
+        result.median_ratio = renderer::bench::median(&pair_ratios);
         if let Some(median) = renderer::bench::median(&pair_ratios) {
             let list: Vec<String> = pair_ratios.iter().map(|r| format!("{r:.2}")).collect();
             println!("  ours/Mitsuba run by run (the two renders of a run back to back): {} ; median {median:.2}x", list.join(" "));
@@ -360,5 +371,5 @@ pub fn integrator_vs_mitsuba(scene_path: &Path, s: &Settings, mitsuba: bool) -> 
             rel(ours_mean[2], t.mean[2])
         );
     }
-    Ok(())
+    Ok(result)
 }

@@ -3,7 +3,7 @@
 //! 512-bit register (AVX-512), skipping clusters of up to four nearby triangles whose box no
 //! lane enters (the BVH's box test, lane by lane). In the Cornell box's wavefront 31 % of the
 //! shadow packets' cluster tests skip their triangles and 23 % of the closest-hit packets'
-//! (`SPP=1 wave_ab 2`, counted once; docs/performance.md, session 18).
+//! (`SPP=1 wave_ab 2`, counted once; docs/journal/performance.md, commit 92324a2).
 //!
 //! On a mesh of a few dozen triangles (McGuire's Cornell box has 36) a BVH query is short but
 //! serial: the reciprocal's division, a node test, a sorted stack and the leaf tests, with

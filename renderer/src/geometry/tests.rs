@@ -520,7 +520,7 @@ fn offset_origin_near_the_world_origin_avoids_self_hits() {
 /// Rays that start a hair's breadth from a flat box and run along it, far from the world
 /// origin, to targets near the box's edges: the slab distance to the flat side is tiny next to
 /// the origin's magnitude, so a node test that rounds the origin's term on its own (as a fused
-/// p·inv − fl(o·inv) would, docs/performance.md, session 14) culls some of them unless the boxes
+/// p·inv − fl(o·inv) would, docs/journal/performance.md) culls some of them unless the boxes
 /// are widened for it. Every ray must hit what the brute-force test hits, with the same t, on
 /// the AVX2 path (where the CPU has it) and the SSE2 one, rays from a million units away too.
 #[test]

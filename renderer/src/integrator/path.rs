@@ -82,9 +82,10 @@ pub fn trace(scene: &Scene, ray: Ray, rng: &mut Pcg32, max_bounces: u32, russian
     for depth in 0..=max_bounces {
         out.rays += 1;
         let Some(hit) = scene.accel.intersect(&ray, f32::INFINITY) else {
-            let le = scene.lights.env_radiance(ray.dir);
+            let mis = !(depth == 0 || prev_delta);
+            let (le, light_pdf) = scene.lights.env_radiance_pdf(ray.dir, mis);
             if le.max_element() > 0.0 {
-                let w = if depth == 0 || prev_delta { 1.0 } else { power_heuristic(prev_pdf, scene.lights.env_pdf(ray.dir)) };
+                let w = if mis { power_heuristic(prev_pdf, light_pdf) } else { 1.0 };
                 l_diffuse += beta.diffuse * le * w;
                 l_specular += beta.specular * le * w;
             }

@@ -23,6 +23,11 @@ pub(crate) struct Distribution1D {
     cdf: Vec<f32>,
     /// Sum of `func` (in f64 so that millions of small texels do not lose precision).
     sum: f64,
+    /// `guide[k]`: the first index of `cdf` above k/n, for k in 0..=n (n cells). A u in
+    /// [k/n, (k+1)/n) has its answer between `guide[k − 1]` and `guide[k + 2]` (one bucket of
+    /// margin either side absorbs the rounding of u·n and k/n), so `find` searches that span
+    /// instead of the whole CDF: the same index, a few steps instead of log₂ n.
+    guide: Vec<u32>,
 }
 
 impl Distribution1D {
@@ -42,7 +47,9 @@ impl Distribution1D {
         }
         // Rounding must not leave a gap at the top that a u close to 1 could fall into.
         *cdf.last_mut().unwrap() = 1.0;
-        Some(Distribution1D { func, cdf, sum })
+        let n = func.len();
+        let guide = (0..=n).map(|k| cdf.partition_point(|&c| c <= k as f32 / n as f32) as u32).collect();
+        Some(Distribution1D { func, cdf, sum, guide })
     }
 
     pub fn func(&self, i: usize) -> f32 {
@@ -60,7 +67,11 @@ impl Distribution1D {
 
     fn find(&self, u: f32) -> usize {
         // Largest i with cdf[i] <= u: cells of zero weight have cdf[i] == cdf[i+1] and are skipped.
-        self.cdf.partition_point(|&c| c <= u).saturating_sub(1).min(self.func.len() - 1)
+        let n = self.func.len();
+        let k = ((u * n as f32) as usize).min(n);
+        let (lo, hi) = (self.guide[k.saturating_sub(1)] as usize, self.guide[(k + 2).min(n)] as usize);
+        let first_above = lo + self.cdf[lo..hi].partition_point(|&c| c <= u);
+        first_above.saturating_sub(1).min(n - 1)
     }
 
     /// A cell index for discrete sampling, drawn with probability `pmf`; never a zero-weight
@@ -124,5 +135,42 @@ impl Distribution2D {
         let x = if uv.x >= 0.0 { ((uv.x * self.width as f32) as usize).min(self.width - 1) } else { 0 };
         let y = if uv.y >= 0.0 { ((uv.y * self.height as f32) as usize).min(self.height - 1) } else { 0 };
         (x, y)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The guided search returns the index the search over the whole CDF returns, for u at
+    /// random and at every bucket edge k/n and its neighbouring floats, on distributions with
+    /// runs of zero-weight cells and weights spanning 12 orders of magnitude.
+    #[test]
+    fn guided_search_finds_what_the_full_search_finds() {
+        let mut rng = crate::rng::Pcg32::new(3, 5);
+        for n in [1usize, 2, 3, 7, 64, 1000, 4097] {
+            for trial in 0..4 {
+                let weights: Vec<f64> = (0..n)
+                    .map(|i| match (trial, i % 5) {
+                        (1, 0 | 1) => 0.0,
+                        (2, _) => 10f64.powi((rng.next_f32() * 12.0) as i32 - 6),
+                        (3, _) if i > n / 3 => 0.0,
+                        _ => rng.next_f32() as f64 + 1e-3,
+                    })
+                    .collect();
+                let Some(d) = Distribution1D::new(weights) else { continue };
+                let full = |u: f32| d.cdf.partition_point(|&c| c <= u).saturating_sub(1).min(n - 1);
+                let mut us: Vec<f32> = (0..2000).map(|_| rng.next_f32()).collect();
+                for k in 0..=n {
+                    let e = k as f32 / n as f32;
+                    us.extend([e, f32::from_bits(e.to_bits().saturating_sub(1)), f32::from_bits(e.to_bits() + 1)]);
+                }
+                us.extend(d.cdf.iter().copied());
+                for u in us {
+                    let u = sanitize_u(u);
+                    assert_eq!(d.find(u), full(u), "n {n} trial {trial} u {u}");
+                }
+            }
+        }
     }
 }

@@ -36,7 +36,7 @@
 //! Negative, NaN or infinite texels (and a negative or non-finite `scale`) count as 0.
 
 use super::distribution::Distribution2D;
-use super::Environment;
+use super::{Environment, EnvironmentView};
 use crate::math::PI;
 use crate::sampling::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
 use glam::{Vec2, Vec3};
@@ -135,6 +135,16 @@ impl EnvLight {
         }
     }
 
+    pub fn view(&self) -> EnvironmentView<'_> {
+        match self {
+            EnvLight::Black => EnvironmentView::Black,
+            EnvLight::Constant(c) => EnvironmentView::Constant(*c),
+            EnvLight::Map(m) => {
+                EnvironmentView::Map { width: m.width, height: m.height, texels: &m.texels, cos_rot: m.cos_rot, sin_rot: m.sin_rot }
+            }
+        }
+    }
+
     pub fn is_black(&self) -> bool {
         matches!(self, EnvLight::Black)
     }
@@ -158,6 +168,19 @@ impl EnvLight {
         }
     }
 
+    /// `radiance(dir)` and, if `want_pdf`, `pdf(dir)` (else 0), the direction's texture
+    /// coordinates found once for both: each costs an atan2 and an acos.
+    pub fn radiance_pdf(&self, dir: Vec3, want_pdf: bool) -> (Vec3, f32) {
+        match self {
+            EnvLight::Black => (Vec3::ZERO, 0.0),
+            EnvLight::Constant(c) => (*c, if want_pdf { UNIFORM_SPHERE_PDF } else { 0.0 }),
+            EnvLight::Map(m) => match m.uv_of(dir) {
+                None => (Vec3::ZERO, 0.0),
+                Some((uv, sin_theta)) => (m.lookup_uv(uv), if want_pdf { m.pdf_uv(uv, sin_theta) } else { 0.0 }),
+            },
+        }
+    }
+
     /// Solid-angle density of `sample`, selection not included.
     pub fn pdf(&self, dir: Vec3) -> f32 {
         match self {
@@ -167,16 +190,17 @@ impl EnvLight {
         }
     }
 
-    /// A world direction and its density `self.pdf(wi)`; `None` if that density is 0.
-    pub fn sample(&self, u: Vec2) -> Option<(Vec3, f32)> {
+    /// A world direction, its density `self.pdf(wi)` and `self.radiance(wi)`; `None` if that
+    /// density is 0.
+    pub fn sample(&self, u: Vec2) -> Option<(Vec3, f32, Vec3)> {
         match self {
             EnvLight::Black => None,
-            EnvLight::Constant(_) => Some((square_to_uniform_sphere(u), UNIFORM_SPHERE_PDF)),
+            EnvLight::Constant(c) => Some((square_to_uniform_sphere(u), UNIFORM_SPHERE_PDF, *c)),
             EnvLight::Map(m) => {
                 let uv = m.dist.sample(u);
                 let wi = m.to_world(uv_to_dir(uv));
-                let pdf = m.pdf(wi);
-                (pdf > 0.0).then_some((wi, pdf))
+                let (radiance, pdf) = self.radiance_pdf(wi, true);
+                (pdf > 0.0).then_some((wi, pdf, radiance))
             }
         }
     }
@@ -221,14 +245,30 @@ impl EnvMap {
     }
 
     fn texel(&self, x: i64, y: i64) -> Vec3 {
-        let x = x.rem_euclid(self.width as i64) as usize;
+        // Lookups ask for columns −1 to W: a wrap by one width spares the division.
+        let w = self.width as i64;
+        let x = if x < 0 {
+            x + w
+        } else if x >= w {
+            x - w
+        } else {
+            x
+        };
+        let x = if (0..w).contains(&x) { x as usize } else { x.rem_euclid(w) as usize };
         let y = y.clamp(0, self.height as i64 - 1) as usize;
         self.texels[y * self.width + x]
     }
 
+    /// Texture coordinates and sin θ of a world direction (`None` for zero or non-finite).
+    fn uv_of(&self, dir: Vec3) -> Option<(Vec2, f32)> {
+        self.to_map(dir).map(dir_to_uv)
+    }
+
     fn lookup(&self, dir: Vec3) -> Vec3 {
-        let Some(d) = self.to_map(dir) else { return Vec3::ZERO };
-        let (uv, _) = dir_to_uv(d);
+        self.uv_of(dir).map_or(Vec3::ZERO, |(uv, _)| self.lookup_uv(uv))
+    }
+
+    fn lookup_uv(&self, uv: Vec2) -> Vec3 {
         let x = uv.x * self.width as f32 - 0.5;
         let y = uv.y * self.height as f32 - 0.5;
         let (x0, y0) = (x.floor(), y.floor());
@@ -246,8 +286,10 @@ impl EnvMap {
     }
 
     fn pdf(&self, dir: Vec3) -> f32 {
-        let Some(d) = self.to_map(dir) else { return 0.0 };
-        let (uv, sin_theta) = dir_to_uv(d);
+        self.uv_of(dir).map_or(0.0, |(uv, sin_theta)| self.pdf_uv(uv, sin_theta))
+    }
+
+    fn pdf_uv(&self, uv: Vec2, sin_theta: f32) -> f32 {
         if !(sin_theta > 0.0) {
             return 0.0;
         }

@@ -35,6 +35,21 @@ pub enum Environment {
     Map { image: Texture, rotation_deg: f32, scale: f32 },
 }
 
+/// The environment as the lights hold it: sanitised, with the map's `scale` applied (what a
+/// scene exporter writes out; `light::environment` documents the map's convention).
+pub enum EnvironmentView<'a> {
+    Black,
+    Constant(Vec3),
+    /// `texels` row-major from the zenith row; `d_world = R_y(α) · d_map` with cos α, sin α.
+    Map {
+        width: usize,
+        height: usize,
+        texels: &'a [Vec3],
+        cos_rot: f32,
+        sin_rot: f32,
+    },
+}
+
 /// A sampled point on a light, as seen from a shading point.
 #[derive(Clone, Copy, Debug)]
 pub struct LightSample {
@@ -144,9 +159,8 @@ impl Lights {
             return None;
         }
         if i == self.triangles.len() {
-            let (wi, pdf) = self.env.sample(u)?;
+            let (wi, pdf, radiance) = self.env.sample(u)?;
             let pdf = pmf * pdf;
-            let radiance = self.env.radiance(wi);
             // A direction between texels can filter to black: not worth a shadow ray.
             let useful = pdf > 0.0 && pdf.is_finite() && radiance.max_element() > 0.0 && wi.is_finite();
             return useful.then_some(LightSample { wi, dist: f32::INFINITY, radiance, pdf, prim: None });
@@ -186,9 +200,21 @@ impl Lights {
         light.connect(p, p_light, n_light, pmf).map_or(0.0, |(_, _, pdf)| pdf)
     }
 
+    /// The environment light, as rendered.
+    pub fn environment(&self) -> EnvironmentView<'_> {
+        self.env.view()
+    }
+
     /// Radiance of the environment along world direction `dir` (pointing away from the scene).
     pub fn env_radiance(&self, dir: Vec3) -> Vec3 {
         self.env.radiance(dir)
+    }
+
+    /// `env_radiance(dir)` and, if `want_pdf`, `env_pdf(dir)` (else 0), for the price of one.
+    pub fn env_radiance_pdf(&self, dir: Vec3, want_pdf: bool) -> (Vec3, f32) {
+        let pmf = self.env_pmf();
+        let (radiance, pdf) = self.env.radiance_pdf(dir, want_pdf && pmf > 0.0);
+        (radiance, if pmf > 0.0 { pmf * pdf } else { 0.0 })
     }
 
     /// Density (solid angle, selection included) with which `sample` picks environment direction `dir`.

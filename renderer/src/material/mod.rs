@@ -29,6 +29,7 @@ use conductor::Conductor;
 pub use description::{ColorParam, Material, MaterialKind};
 use dielectric::Dielectric;
 pub use microfacet::Distribution;
+pub(crate) use plastic::mitsuba_nonlinear_albedo;
 use plastic::Plastic;
 
 /// What kind of lobe produced a sample; mirrors the renderer bitmask of method.md §1.1.

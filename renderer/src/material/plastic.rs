@@ -169,6 +169,23 @@ fn mitsuba_internal_reflectance(eta: f32, alpha: f32, dist: Distribution) -> f32
     v
 }
 
+/// The diffuse reflectance ρ′ that makes Mitsuba's nonlinear `roughplastic` reflect the diffuse
+/// energy our nonlinear rough plastic of albedo ρ does (the scene exporter's stand-in: Mitsuba
+/// has no plastic with our internal reflectance). Both compute the diffuse term as
+/// ρ/(1 − ρ R_int) times the same coat transmittances; only R_int differs (ours by reciprocity
+/// from the outside albedo, Mitsuba's its single-scattering inside albedo), so with
+/// k = ρ/(1 − ρ R_ours), ρ′ = k/(1 + k R_Mitsuba) gives ρ′/(1 − ρ′ R_Mitsuba) = k. A smooth coat
+/// keeps ρ: both take the smooth interface's internal reflectance (Mitsuba by a fit, ours exact).
+pub(crate) fn mitsuba_nonlinear_albedo(albedo: Vec3, eta: f32, alpha: f32, dist: Distribution) -> Vec3 {
+    let p = Plastic::new(albedo, eta, alpha, dist, true);
+    if p.smooth() {
+        return p.albedo;
+    }
+    let (r_ours, r_mitsuba) = (p.internal_reflectance(), mitsuba_internal_reflectance(p.eta, p.alpha, dist));
+    let k = p.albedo / (Vec3::ONE - p.albedo * r_ours).max(Vec3::splat(1e-6));
+    k / (Vec3::ONE + k * r_mitsuba)
+}
+
 /// Cell index and fraction of coordinate `x` on a grid of `n` nodes spaced 1 apart.
 fn cell(x: f32, n: usize) -> (usize, f32) {
     let x = x.clamp(0.0, (n - 1) as f32);

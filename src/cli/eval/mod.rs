@@ -1,4 +1,4 @@
-//! `pixguide eval`: the speed-versus-error evaluation of issue #6 — every held-out test scene
+//! `pixguide eval`: the speed-versus-error evaluation — every held-out test scene
 //! rendered at each spp, denoised in process by every method, scored against its reference;
 //! written to docs/results.md with plots and pictures (report.rs). Resumable through a
 //! cache of finished measurements.

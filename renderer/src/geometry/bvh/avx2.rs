@@ -32,7 +32,7 @@ impl Avx2 {
 /// pass of 256-bit operations (`tri8_test`, paired by 128-bit inserts) gain nothing on
 /// testing them one at a time, and lose the exit after a missed first block: one at a time
 /// traced the displaced sphere's camera rays 3–4 % faster and the Cornell box's 4 % faster in
-/// one process (`bvh_ab e 5 5:tri4`, docs/performance.md, session 11).
+/// one process (`bvh_ab e 5 5:tri4`, docs/journal/performance.md).
 fn splits_256_bit_operations() -> bool {
     let (v, l) = (__cpuid(0), __cpuid(1).eax);
     // "AuthenticAMD" in EBX, EDX, ECX.
