@@ -73,7 +73,7 @@ fn eval_tiny_configuration_writes_the_page_and_resumes() {
     // method, render, preprocessing, D_G, D_P, E + blend, tiling, OIDN filter (– for guided), total.
     let bd = row(&md, "## Runtime breakdown", "2");
     assert_eq!(bd.len(), 9, "{bd:?}");
-    assert_eq!((bd[0], bd[7]), ("guided-joint", "–"), "{bd:?}");
+    assert_eq!((bd[0], bd[7]), ("guided, joint E", "–"), "{bd:?}");
     assert!(bd[1..7].iter().chain([&bd[8]]).all(|c| c.parse::<f64>().is_ok_and(|v| v >= 0.0)), "{bd:?}");
     assert!(!md.contains("D_P (p)") && md.contains("cores (`nproc`)") && md.contains("--methods noisy,g,guided-joint"));
 

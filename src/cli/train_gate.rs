@@ -161,12 +161,16 @@ pub fn run(a: TrainGateArgs) -> Result<()> {
     }
     let t1 = std::time::Instant::now();
     let mut best = f64::INFINITY;
+    let mut last = std::time::Instant::now();
     let names: Vec<&str> = experts.iter().map(|e| e.name()).collect();
     let trained = train(&tr, &val, &opts, &mut |step, loss, v: Option<&GateValidation>| {
         bar.set_position(step as u64);
         if step > 0 {
-            let _ = writeln!(log, "{}", serde_json::json!({"event": "step", "stage": 0, "step": step, "loss": loss}));
+            // Each step's seconds, as `train` logs them, so `pixguide plot-training` reads this log.
+            let seconds = last.elapsed().as_secs_f64();
+            let _ = writeln!(log, "{}", serde_json::json!({"event": "step", "stage": 0, "step": step, "loss": loss, "seconds": seconds}));
         }
+        last = std::time::Instant::now();
         if let Some(v) = v {
             let is_best = v.rel_mse < best;
             best = best.min(v.rel_mse);

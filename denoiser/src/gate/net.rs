@@ -75,7 +75,7 @@ impl GateConfig {
         }
         let mut up = Vec::new();
         for l in (0..w.len() - 1).rev() {
-            let from = if l + 1 == w.len() - 1 { w[l + 1] } else { w[l + 1] };
+            let from = w[l + 1];
             let spec = ConvSpec {
                 in_channels: from + w[l],
                 out_channels: w[l],

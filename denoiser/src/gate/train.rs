@@ -161,7 +161,7 @@ pub fn train(
     let k = opts.experts.len();
     let config = GateConfig::new(feature_channels(k), k).with_widths(opts.widths.clone());
     let s = opts.crop;
-    if s == 0 || s % config.alignment() != 0 {
+    if s == 0 || !s.is_multiple_of(config.alignment()) {
         return Err(format!("--crop {s} must be a positive multiple of {}", config.alignment()));
     }
     let data: Vec<Prepared> = train.iter().filter(|im| im.width >= s && im.height >= s).map(|im| prepare(im, &opts.experts)).collect();
