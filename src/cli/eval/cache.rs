@@ -69,8 +69,8 @@ fn fnv1a(bytes: &[u8]) -> u64 {
 
 /// Size and FNV-1a 64 hash of a file: changes whenever the weights do.
 pub(super) fn file_id(path: &Path) -> Result<String> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    Ok(format!("{}:{:016x}", bytes.len(), fnv1a(&bytes)))
+    // The same identity a gate file records for its experts.
+    Ok(denoiser::gate::file::file_id(path)?)
 }
 
 fn read_cache(path: &Path) -> Result<HashMap<String, Record>> {

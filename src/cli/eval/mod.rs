@@ -110,7 +110,8 @@ pub struct PictureData {
     pub reference: Vec<f32>,
     /// (method, radiance, relMSE).
     pub images: Vec<(EvalMethod, Vec<f32>, f64)>,
-    pub weights_g: Option<denoiser::infer::BranchMaps>,
+    /// Weight maps of the methods that blend: (panel label, method name, `[H, W]` map).
+    pub weights: Vec<(String, &'static str, Vec<f32>)>,
 }
 
 /// What `run` measured, for the report.
@@ -336,7 +337,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
             height: h,
             reference: refr.clone(),
             images: Vec::new(),
-            weights_g: None,
+            weights: Vec::new(),
         });
         // Two renders with the same seed: without descriptors (the input, and the time, of noisy
         // and G) and with them (P, both, guided). Recording descriptors must not change the
@@ -381,7 +382,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 ..Default::default()
             };
             let image: Vec<f32>;
-            let mut wg = None;
+            let mut maps: Vec<(String, &'static str, Vec<f32>)> = Vec::new();
             match (&m.oidn, &m.loaded) {
                 _ if m.gated.is_some() => {
                     let g = m.gated.as_ref().expect("checked");
@@ -403,6 +404,9 @@ pub fn run(a: EvalArgs) -> Result<()> {
                             })
                             .collect(),
                     );
+                    for (k, e) in g.experts().iter().enumerate() {
+                        maps.push((format!("W {e}"), m.name(), weights[k * n..(k + 1) * n].to_vec()));
+                    }
                     image = radiance;
                 }
                 (Some(o), _) => {
@@ -427,7 +431,10 @@ pub fn run(a: EvalArgs) -> Result<()> {
                     (r.gather_s, r.d_g_s, r.d_p_s, r.e_s, r.readback_s) = (t.gather_s, t.d_g_s, t.d_p_s, t.e_s, t.readback_s);
                     image = d.radiance;
                     r.mean_w = d.weights_g.as_ref().map(methods::mean_weights);
-                    wg = d.weights_g;
+                    if let Some(wg) = d.weights_g {
+                        maps.push(("W_G diffuse".into(), m.name(), wg.diffuse));
+                        maps.push(("W_G specular".into(), m.name(), wg.specular));
+                    }
                 }
             }
             let e = metrics::evaluate(&image, refr, w, h, metrics::DEFAULT_BORDER);
@@ -458,9 +465,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
             if let Some(p) = picture.as_mut() {
                 if PICTURE_METHODS.contains(&m.kind) {
                     p.images.push((m.kind, image, r.rel_mse));
-                    if m.kind == EvalMethod::GuidedJoint {
-                        p.weights_g = wg;
-                    }
+                    p.weights.append(&mut maps);
                 }
             }
             cache.put(r)?;

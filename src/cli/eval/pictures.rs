@@ -218,21 +218,17 @@ pub fn write_pictures(dir: &Path, p: &PictureData) -> Result<()> {
     sheet.put(0, ordered.len(), &bar, bs, "scale", "10⁻⁴ to 1");
     sheet.save(&errors_png)?;
 
-    let mut sheet = Sheet::new(3, 2, tile);
-    match &p.weights_g {
-        Some(m) => {
-            for (k, (v, name)) in [(&m.diffuse, "W_G diffuse"), (&m.specular, "W_G specular")].into_iter().enumerate() {
-                let v: Vec<f64> = v.iter().map(|&x| x as f64).collect();
-                both_rows(&mut sheet, k, mapped(&v, &viridis), name, "guided", &format!("mean {:.2}", window_mean(&v, w, win)));
-            }
-        }
-        None => {
-            let blank = vec![24u8; w * h * 3];
-            sheet.put(0, 0, &blank, tile, "no guided", "model");
-        }
+    let mut sheet = Sheet::new(p.weights.len().max(1) + 1, 2, tile);
+    if p.weights.is_empty() {
+        let blank = vec![24u8; w * h * 3];
+        sheet.put(0, 0, &blank, tile, "no guided", "model");
+    }
+    for (k, (name, method, map)) in p.weights.iter().enumerate() {
+        let v: Vec<f64> = map.iter().map(|&x| x as f64).collect();
+        both_rows(&mut sheet, k, mapped(&v, &viridis), name, method, &format!("mean {:.2}", window_mean(&v, w, win)));
     }
     let (bar, bs) = colour_bar(tile.1, viridis);
-    sheet.put(0, 2, &bar, bs, "scale", "0 to 1");
+    sheet.put(0, p.weights.len().max(1), &bar, bs, "scale", "0 to 1");
     sheet.save(&weights_png)?;
     Ok(())
 }
